@@ -1,0 +1,33 @@
+"""Helpers shared by the sub-commands: the user-facing error type, exit codes, atomic writes."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+EXIT_NOT_CONVERGED = 3
+
+
+class CliError(Exception):
+    """A user-facing error: printed as one line on stderr, exit code 2, no traceback."""
+
+
+def write_atomically(path: str | os.PathLike, data: str | bytes) -> None:
+    """Writes ``data`` to ``path`` through a temporary file and a rename, so that an existing
+    file is never left half-written (nothing the user had is lost on a crash)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mode = "wb" if isinstance(data, bytes) else "w"
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
