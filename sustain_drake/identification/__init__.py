@@ -1,0 +1,36 @@
+"""The paper's identification math (§3.1, §3.2, §3.4, §4.4) in pure numpy/scipy: no pydrake here.
+
+- ``sustainable_identifier``: the constant-memory statistic, its eigen-solution and the verdict.
+- ``rotation``: the §3.2 projection onto SO(3).
+- ``eye_to_hand``: the one-point eye-to-hand formulation (N = 16), conditioning, refinement.
+- ``payload``: the static payload formulation (N = 5) and the wrench sign convention.
+- ``batch``: ``calibrate_eye_to_hand`` and ``identify_payload`` for recorded data.
+"""
+
+from sustain_drake.identification.batch import (
+    EyeToHandResult,
+    PayloadResult,
+    calibrate_eye_to_hand,
+    identify_payload,
+)
+from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
+from sustain_drake.identification.payload import PayloadIdentifier
+from sustain_drake.identification.sustainable_identifier import (
+    ConvergenceCriteria,
+    IdentificationError,
+    SustainableIdentifier,
+    Verdict,
+)
+
+__all__ = [
+    "ConvergenceCriteria",
+    "EyeToHandIdentifier",
+    "EyeToHandResult",
+    "IdentificationError",
+    "PayloadIdentifier",
+    "PayloadResult",
+    "SustainableIdentifier",
+    "Verdict",
+    "calibrate_eye_to_hand",
+    "identify_payload",
+]

@@ -1,0 +1,182 @@
+"""Static payload identification from a wrist force/torque sensor (paper §3.5, §4.4, Eqs. (37)-(38)),
+N = 5, M = 6.
+
+Wrench sign convention (used throughout sustain_drake). The sensor frame K is fixed to the sensor's
+outboard side (the hand). A wrench sample is the 6-vector ``[tau_K; f_K]`` (Drake's SpatialForce
+order: torque first), the force and torque APPLIED BY THE SENSOR (the wrist) ON THE OUTBOARD BODY
+(hand + held object), about K's origin, expressed in K. This is what Drake's
+``MultibodyPlant.get_reaction_forces_output_port()`` reports for the wrist weld's child frame. At
+rest, with the outboard mass m at ``p_KCm`` and gravity ``g_W`` (e.g. ``(0, 0, -9.81)`` m/s^2)::
+
+    R_WK f_K = -m g_W              (the sensor holds the payload up)
+    tau_K    = p_KCm x f_K         (the sensor's torque balances the weight's)
+
+which is linear in ``x = [1/m; p_KCm; 1]`` (Eq. (38)) with::
+
+    A_t = [[R_WK f_K, 0_3x3,    g_W   ],
+           [0_3x1,   -[f_K x], -tau_K]]                                     (Eq. (37))
+
+The rows of ``A_t x`` are in m/s^2 (the first three) and N m (the last three). A sensor whose
+reading is the wrench the payload applies on it (the opposite sign) must be negated first.
+
+Quasi-static: the formulation ignores the payload's acceleration, so samples should be taken while
+the sensor moves slowly (the paper's §4.4 does the same).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sustain_drake.identification.rotation import skew
+from sustain_drake.identification.sustainable_identifier import (
+    ConvergenceCriteria,
+    EigenSolution,
+    SustainableIdentifier,
+    Verdict,
+    judge,
+)
+
+N_UNKNOWNS = 5
+M_ROWS = 6
+STANDARD_GRAVITY_W = np.array([0.0, 0.0, -9.81])
+
+
+def default_criteria() -> ConvergenceCriteria:
+    """Defaults for the payload: expected RMS residual <= 0.3 (m/s^2 and N m rows together),
+    gap >= 10, at least 10 samples. There is no rotation, so no SSD criterion."""
+    return ConvergenceCriteria(max_expected_rms=0.3, min_gap_ratio=10.0, max_ssd=None, min_samples=10)
+
+
+def build_A(wrench_K: np.ndarray, R_WK: np.ndarray, g_W: np.ndarray, out=None) -> np.ndarray:
+    """``A_t`` of Eq. (37) (6 x 5) for one wrench sample ``[tau_K; f_K]``."""
+    A = np.zeros((M_ROWS, N_UNKNOWNS)) if out is None else out
+    tau = wrench_K[0:3]
+    f = wrench_K[3:6]
+    A[0:3, 0] = R_WK @ f
+    A[0:3, 4] = g_W
+    A[3:6, 1:4] = -skew(f)
+    A[3:6, 4] = -tau
+    return A
+
+
+@dataclass(frozen=True, slots=True)
+class PayloadSolution:
+    """Everything one solve gives.
+
+    Attributes:
+        eigen: the eigen-decomposition of the conditioned statistic (None before any sample).
+        mass: m in kg (``nan``-free: 0 when there is no estimate).
+        p_KCm: the centre of mass in the sensor frame K, metres.
+        x: ``[1/m; p_KCm; 1]``.
+        expected_mse: ``a^2 lambda_N`` (Eq. (13)), in (m/s^2)^2 + (N m)^2 per sample.
+        verdict: the convergence verdict.
+        num_samples: samples behind this solution.
+    """
+
+    eigen: EigenSolution | None
+    mass: float
+    p_KCm: np.ndarray
+    x: np.ndarray
+    expected_mse: float
+    verdict: Verdict
+    num_samples: int
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        return self.eigen.eigenvalues if self.eigen is not None else np.zeros(N_UNKNOWNS)
+
+    @property
+    def expected_rms(self) -> float:
+        return math.sqrt(max(self.expected_mse, 0.0))
+
+
+class PayloadIdentifier:
+    """The sustainable identifier with the static payload formulation.
+
+    Args:
+        gravity_W: gravity in the world frame, m/s^2.
+        forgetting_factor: see ``SustainableIdentifier``.
+        criteria: convergence criteria (``default_criteria()`` if None).
+    """
+
+    def __init__(
+        self,
+        gravity_W: np.ndarray = STANDARD_GRAVITY_W,
+        forgetting_factor: float = 1.0,
+        criteria: ConvergenceCriteria | None = None,
+    ):
+        self.g_W = np.array(gravity_W, dtype=float)
+        if self.g_W.shape != (3,) or not np.all(np.isfinite(self.g_W)) or not self.g_W.any():
+            raise ValueError(f"gravity_W must be a finite non-zero 3-vector, got {gravity_W}")
+        self._core = SustainableIdentifier(N_UNKNOWNS, forgetting_factor)
+        self.criteria = criteria or default_criteria()
+        self._A = np.zeros((M_ROWS, N_UNKNOWNS))
+
+    @property
+    def core(self) -> SustainableIdentifier:
+        return self._core
+
+    @property
+    def num_samples(self) -> int:
+        return self._core.num_samples
+
+    @property
+    def state(self) -> np.ndarray:
+        return self._core.state
+
+    def set_state(self, state: np.ndarray) -> None:
+        self._core.set_state(state)
+
+    def reset(self) -> None:
+        self._core.reset()
+
+    def add(self, wrench_K: np.ndarray, R_WK: np.ndarray) -> None:
+        """Adds one quasi-static sample: the wrench ``[tau_K; f_K]`` and the sensor orientation."""
+        self._core.add(build_A(wrench_K, R_WK, self.g_W, self._A))
+
+    def sample_error(self, wrench_K: np.ndarray, R_WK: np.ndarray, x: np.ndarray) -> float:
+        """``s_t = ||A_t x||^2`` (Eq. (2)) for a new sample under the estimate ``x``."""
+        return SustainableIdentifier.sample_error(build_A(wrench_K, R_WK, self.g_W), x)
+
+    def solve(self) -> PayloadSolution:
+        """Solves for ``[1/m; p_KCm; 1]``: ``v_N`` scaled so that its last entry is 1 (§3.4).
+
+        Conditioning: the columns are equilibrated (``T = diag(1/sqrt(C_jj))``), so that the unit
+        norm of TLS weighs the mass and the centre-of-mass unknowns alike.
+        """
+        core = self._core
+        n = core.num_samples
+        none = np.zeros(3)
+        if n == 0:
+            return PayloadSolution(None, 0.0, none, np.zeros(N_UNKNOWNS), math.inf,
+                                   Verdict(False, "no samples"), 0)  # fmt: skip
+        diag = np.diag(core.S_view) / core.weight
+        T = np.diag(1.0 / np.sqrt(np.where(diag > 0.0, diag, 1.0)))
+        eigen = core.eigen(T)
+        if eigen is None:
+            return PayloadSolution(None, 0.0, none, np.zeros(N_UNKNOWNS), math.inf,
+                                   Verdict(False, "statistic is not finite (overflow)"), n)  # fmt: skip
+        direction = eigen.direction
+        h = direction[4]
+        problem = None
+        if abs(h) <= 1e-12 * np.max(np.abs(direction)):
+            problem = "the homogeneous entry of v_N is zero: no payload model explains the data"
+            x = np.zeros(N_UNKNOWNS)
+            mass, expected_mse = 0.0, math.inf
+        else:
+            a = 1.0 / h
+            x = a * direction
+            expected_mse = a * a * eigen.lambda_N
+            if not x[0] > 0.0:
+                problem = f"identified 1/m = {x[0]:.3g} is not positive: no payload or wrong wrench sign"
+                mass = 0.0
+            else:
+                mass = 1.0 / x[0]
+        verdict = judge(
+            self.criteria, n, eigen, math.sqrt(expected_mse) if math.isfinite(expected_mse) else math.inf,
+            problem,
+        )
+        return PayloadSolution(eigen, mass, x[1:4].copy(), x, expected_mse, verdict, n)

@@ -1,0 +1,87 @@
+"""Rotation helpers: the §3.2 projection of an identified 3 x 3 block onto SO(3) (Challis's method,
+Eqs. (14)-(21)), and the small so(3) maps the Gauss-Newton refinement needs. Pure numpy."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import lapack
+
+_E3 = np.eye(3)
+
+
+def det3(X: np.ndarray) -> float:
+    """Determinant of a 3 x 3 matrix (cofactor expansion: much cheaper than np.linalg.det)."""
+    a, b, c, d, e, f, g, h, i = X.ravel().tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+
+
+def skew(w: np.ndarray) -> np.ndarray:
+    """``[w x]``: the matrix with ``skew(w) @ v == np.cross(w, v)``."""
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: the rotation by ``|w|`` radians about ``w``."""
+    theta = float(np.sqrt(w @ w))
+    K = skew(w)
+    if theta < 1e-8:
+        # Second-order Taylor expansion; exact to round-off for such small angles.
+        return _E3 + K + 0.5 * K @ K
+    return _E3 + (np.sin(theta) / theta) * K + ((1.0 - np.cos(theta)) / theta**2) * K @ K
+
+
+def rotation_angle(R: np.ndarray) -> float:
+    """The angle of a rotation matrix in radians (robust near 0 and pi)."""
+    c = np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)
+    s = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return float(np.arctan2(s, c))
+
+
+@dataclass(frozen=True, slots=True)
+class RotationProjection:
+    """The result of §3.2 for ``X_hat = [x1 x2 x3]`` (the rotation block of ``v_N``).
+
+    Attributes:
+        R: the proper rotation (det +1) nearest ``X_hat`` (after the sign fix) up to scale.
+        scale: ``a = (gamma^T x) / (x^T x)`` (Eq. (21)) including the sign, so that
+            ``a X_hat ~ R`` for the ``X_hat`` given.
+        ssd: the sum of squared differences of ``a R^T X_hat - E`` (closeness to a rotation).
+        sign: +1 or -1, the sign applied to ``v_N`` so that ``det(X_hat) > 0``.
+    """
+
+    R: np.ndarray
+    scale: float
+    ssd: float
+    sign: float
+
+
+def project_to_rotation(x9: np.ndarray) -> RotationProjection:
+    """§3.2, with the two fixes the paper omits: the sign of ``v_N`` and a proper rotation.
+
+    ``x9`` holds the columns of ``X_hat`` stacked (``x9[0:3]`` is the first column). With the SVD
+    ``X_hat = U S V^T``, Challis's nearest rotation is ``U V^T`` (Eqs. (18)-(19)). ``v_N`` is only
+    defined up to sign, and ``det(-X) = -det(X)`` for 3 x 3 matrices, so the sign
+    ``d = det(U) det(V)`` (the sign of ``det(X_hat)``) is applied first: then ``R = d U V^T`` is a
+    proper rotation (det +1) and ``trace(R^T d X_hat) = s_1 + s_2 + s_3``. Hence Eq. (21) and the
+    SSD follow from the singular values alone::
+
+        a = sum(s) / sum(s^2),    SSD = ||a R^T X_hat - E||_F^2 = 3 - sum(s)^2 / sum(s^2).
+    """
+    X = x9.reshape(3, 3, order="F")
+    U, sv, Vt, info = lapack.dgesvd(X)
+    if info != 0:  # only for non-finite input; keep the contract "R is a rotation"
+        return RotationProjection(R=_E3.copy(), scale=0.0, ssd=float("inf"), sign=1.0)
+    sign = 1.0 if det3(U) * det3(Vt) > 0.0 else -1.0
+    R = U @ Vt
+    if sign < 0.0:
+        R = -R
+    s1, s2, s3 = sv.tolist()
+    ssum = s1 + s2 + s3
+    ssq = s1 * s1 + s2 * s2 + s3 * s3
+    if ssq <= 0.0:
+        return RotationProjection(R=R, scale=0.0, ssd=float("inf"), sign=sign)
+    return RotationProjection(
+        R=R, scale=sign * ssum / ssq, ssd=max(3.0 - ssum * ssum / ssq, 0.0), sign=sign
+    )

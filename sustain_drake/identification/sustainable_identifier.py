@@ -1,0 +1,309 @@
+"""The sustainable identifier of the paper's §3.1 (Eqs. (1)-(13)), for any linear formulation.
+
+Every measurement gives a linear constraint ``A_t x = 0`` (``A_t`` is M x N). Only the N x N
+second-moment statistic is kept::
+
+    S_t = sum_t w_t A_t^T A_t,    n_t = sum_t w_t,    C_t = S_t / n_t           (Eq. (3))
+
+so memory and time per sample are O(N^2) however many samples arrive. (With a forgetting
+factor ``f`` in (0, 1], older samples are down-weighted, ``w_t = f^(age)``; ``f = 1`` is the paper.)
+The model is the eigenvector ``v_N`` of the smallest eigenvalue ``lambda_N`` of ``C`` (total least
+squares, Eqs. (7)-(12)); scaled by a constraint, ``x = a v_N``, its expected mean squared error is
+``a^2 lambda_N`` (Eq. (13)).
+
+Conditioning. TLS is not invariant to the scale and offset of the data, so formulations give a
+conditioning transform ``T`` at solve time (``x = T x'``); the eigen-problem is solved on
+``C' = T^T C T`` (the raw statistic is kept, so memory stays constant). The eigenvalues reported
+are those of ``C'``; ``x = a T v'_N`` and the expected mean squared error is still ``a^2 lambda'_N``.
+
+All state lives in one flat float64 vector (``state``), so that a Drake system can keep it in its
+context and contexts can be cloned.
+
+This module is pure numpy/scipy (no pydrake).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import lapack
+
+# Eigenvalues below this fraction of lambda_1 are taken as exactly zero (round-off of a 16 x 16
+# symmetric eigen-solver in float64 is ~1e-16 lambda_1).
+NULL_EIGENVALUE_RTOL = 1e-12
+
+
+class IdentificationError(ValueError):
+    """A sample or an input array that cannot be used (wrong shape, NaN, inf, not a rotation).
+
+    It is a ``ValueError`` with a one-line message meant for the user."""
+
+
+@dataclass(frozen=True)
+class ConvergenceCriteria:
+    """The paper's three reliability criteria (§3.1 (a), (b), (c)) plus a sample count.
+
+    Attributes:
+        max_expected_rms: (a) the identification's expected per-sample RMS error
+            ``sqrt(a^2 lambda_N)`` must not exceed this, in the formulation's residual units
+            (metres for eye-to-hand). This is the physical form of the paper's
+            ``lambda_16 < 5e-5``: it does not depend on how ``v_N`` is normalised.
+        min_gap_ratio: (b) ``lambda_{N-1} / lambda_N`` must be at least this (the null space is
+            one-dimensional: the motion was rich enough).
+        max_ssd: (c) for formulations with a rotation, the Challis SSD of §3.2 must not exceed
+            this (paper: 0.1). ``None`` for formulations without a rotation.
+        min_samples: fewer samples than this is never converged (with exactly as many equations
+            as unknowns the fit is exact whatever the noise, and ``lambda_N = 0`` says nothing).
+    """
+
+    max_expected_rms: float
+    min_gap_ratio: float = 10.0
+    max_ssd: float | None = 0.1
+    min_samples: int = 10
+
+    def __post_init__(self):
+        if not (self.max_expected_rms > 0 and math.isfinite(self.max_expected_rms)):
+            raise ValueError(f"max_expected_rms must be positive, got {self.max_expected_rms}")
+        if not self.min_gap_ratio >= 1:
+            raise ValueError(f"min_gap_ratio must be >= 1, got {self.min_gap_ratio}")
+        if self.max_ssd is not None and not self.max_ssd > 0:
+            raise ValueError(f"max_ssd must be positive or None, got {self.max_ssd}")
+        if not self.min_samples >= 1:
+            raise ValueError(f"min_samples must be >= 1, got {self.min_samples}")
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """Whether an identification has converged, and if not, the first reason why not."""
+
+    converged: bool
+    reason: str
+
+    def __bool__(self) -> bool:
+        return self.converged
+
+    def __str__(self) -> str:
+        return "converged" if self.converged else f"not converged: {self.reason}"
+
+
+@dataclass(frozen=True, slots=True)
+class EigenSolution:
+    """The eigen-decomposition of the (conditioned) statistic, Eqs. (7)-(12).
+
+    Attributes:
+        eigenvalues: ``lambda_1 >= ... >= lambda_N >= 0`` of ``C' = T^T C T``.
+        v_N: the unit eigenvector of ``lambda_N``, in the conditioned coordinates ``x'``.
+        direction: ``T v_N``, the same direction in the raw parameters ``x`` (not unit).
+        num_null: how many eigenvalues are zero to round-off (>= 2 means the motion was not
+            rich enough: the null space is more than one-dimensional). It is 1 both when only
+            ``lambda_N`` is zero and when none is; the count is exact when it is 2 or more.
+    """
+
+    eigenvalues: np.ndarray
+    v_N: np.ndarray
+    direction: np.ndarray
+    num_null: int
+
+    @property
+    def lambda_N(self) -> float:
+        return float(self.eigenvalues[-1])
+
+    @property
+    def lambda_N_minus_1(self) -> float:
+        return float(self.eigenvalues[-2])
+
+    @property
+    def gap_ratio(self) -> float:
+        """``lambda_{N-1} / lambda_N`` (inf when ``lambda_N`` is zero and ``lambda_{N-1}`` is not)."""
+        if self.num_null >= 2:
+            return 1.0
+        if self.lambda_N <= 0.0:
+            return math.inf
+        return self.lambda_N_minus_1 / self.lambda_N
+
+
+def judge(
+    criteria: ConvergenceCriteria,
+    num_samples: int,
+    eigen: EigenSolution | None,
+    expected_rms: float,
+    constraint_problem: str | None,
+    ssd: float | None = None,
+    rms_unit: str = "",
+) -> Verdict:
+    """Applies the paper's criteria (a), (b), (c) in an order that gives the most useful reason.
+
+    Never judges from ``lambda_N`` alone: with too few or too similar samples ``lambda_N`` is 0
+    because the null space has several dimensions, and that is "not converged".
+    """
+    if eigen is None:
+        return Verdict(False, "no samples")
+    if num_samples < criteria.min_samples:
+        return Verdict(False, f"too few samples: {num_samples} < {criteria.min_samples}")
+    if eigen.num_null >= 2:
+        return Verdict(
+            False,
+            f"motion not rich enough: the null space is {eigen.num_null}-dimensional "
+            "(e.g. pure translation of the hand, or too few distinct samples)",
+        )
+    if eigen.gap_ratio < criteria.min_gap_ratio:
+        return Verdict(
+            False,
+            f"eigenvalue gap too small: lambda_N-1/lambda_N = {eigen.gap_ratio:.3g} < "
+            f"{criteria.min_gap_ratio:.3g} (motion not rich enough yet)",
+        )
+    if constraint_problem is not None:
+        return Verdict(False, constraint_problem)
+    if criteria.max_ssd is not None and ssd is not None and not ssd <= criteria.max_ssd:
+        return Verdict(False, f"not a rotation: SSD {ssd:.3g} > {criteria.max_ssd:.3g}")
+    if not expected_rms <= criteria.max_expected_rms:
+        return Verdict(
+            False,
+            f"expected RMS error {expected_rms:.3g}{rms_unit} > "
+            f"{criteria.max_expected_rms:.3g}{rms_unit}",
+        )
+    return Verdict(True, "converged")
+
+
+class SustainableIdentifier:
+    """Accumulates ``S = sum w A_t^T A_t`` in O(N^2) per sample and solves it at any time (§3.1).
+
+    Formulations (eye-to-hand, payload) build ``A_t`` and compute their conditioning transform
+    from the statistic itself (its entries hold the running sums they need).
+
+    Args:
+        num_unknowns: N.
+        forgetting_factor: ``f`` in (0, 1]; each new sample first multiplies the statistic by
+            ``f``. 1 (the default) is the paper's plain mean.
+    """
+
+    def __init__(self, num_unknowns: int, forgetting_factor: float = 1.0):
+        if num_unknowns < 2:
+            raise ValueError(f"num_unknowns must be >= 2, got {num_unknowns}")
+        if not 0.0 < forgetting_factor <= 1.0:
+            raise ValueError(f"forgetting_factor must be in (0, 1], got {forgetting_factor}")
+        self._N = int(num_unknowns)
+        self._forgetting = float(forgetting_factor)
+        # Layout: [S (N*N, row-major) | n_eff | count]. Everything but the count is scaled by the
+        # forgetting factor, so it is one contiguous slice.
+        n2 = self._N * self._N
+        self._n_index = n2
+        self._state = np.zeros(n2 + 2)
+        self._S = self._state[:n2].reshape(self._N, self._N)
+        self._weighted = self._state[:-1]
+
+    # ---- state ----------------------------------------------------------------------------
+    @property
+    def num_unknowns(self) -> int:
+        return self._N
+
+    @property
+    def forgetting_factor(self) -> float:
+        return self._forgetting
+
+    @property
+    def state(self) -> np.ndarray:
+        """A copy of the whole state as one flat vector (constant size, whatever the samples)."""
+        return self._state.copy()
+
+    def set_state(self, state: np.ndarray) -> None:
+        state = np.asarray(state, dtype=float)
+        if state.shape != self._state.shape:
+            raise ValueError(f"state must have shape {self._state.shape}, got {state.shape}")
+        self._state[:] = state
+
+    @property
+    def state_size(self) -> int:
+        return self._state.size
+
+    def reset(self) -> None:
+        """Forgets every sample (the paper's "renew C at the beginning of each identification")."""
+        self._state[:] = 0.0
+
+    @property
+    def num_samples(self) -> int:
+        """Samples added since the last reset (not down-weighted by forgetting)."""
+        return int(round(self._state[-1]))
+
+    @property
+    def weight(self) -> float:
+        """``n_t``: the (forgetting-weighted) number of samples."""
+        return float(self._state[self._n_index])
+
+    @property
+    def S(self) -> np.ndarray:
+        """``n_t C_t``: the weighted sum of ``A_t^T A_t`` (a copy)."""
+        return self._S.copy()
+
+    @property
+    def S_view(self) -> np.ndarray:
+        """``S`` without a copy (read-only use: it changes with the next sample)."""
+        return self._S
+
+    @property
+    def C(self) -> np.ndarray:
+        """``C_t = S_t / n_t``, Eq. (3) (zeros before any sample)."""
+        n = self.weight
+        return self._S / n if n > 0 else np.zeros_like(self._S)
+
+    # ---- samples --------------------------------------------------------------------------
+    def add(self, A: np.ndarray) -> None:
+        """Adds one sample's ``A_t`` (M x N). O(N^2) time, no growth.
+
+        Raises:
+            IdentificationError: ``A`` has the wrong width or is not finite. The state is then
+                unchanged.
+        """
+        AtA = A.T @ A
+        if AtA.shape != self._S.shape:
+            raise IdentificationError(f"A_t must have {self._N} columns, got shape {A.shape}")
+        # One scalar check catches NaN, inf and overflow in A^T A (a NaN or inf makes the sum
+        # non-finite), before anything is committed to the state.
+        if not math.isfinite(AtA.sum()):
+            raise IdentificationError("sample is not finite (NaN, inf or overflow)")
+        if self._forgetting != 1.0:
+            self._weighted *= self._forgetting
+        self._S += AtA
+        self._state[self._n_index] += 1.0
+        self._state[-1] += 1.0
+
+    # ---- solving --------------------------------------------------------------------------
+    def eigen(self, T: np.ndarray | None = None) -> EigenSolution | None:
+        """Eigen-decomposes ``C' = T^T C T`` (``T``, the conditioning transform with
+        ``x = T x'``, defaults to the identity).
+
+        Returns None before any sample, or when the statistic is not finite (overflow).
+        """
+        n = self._state[self._n_index]
+        if n <= 0.0:
+            return None
+        C = self._S if T is None else T.T @ self._S @ T
+        # C is symmetric PSD, so a symmetric eigen-solver is the right tool, not a general SVD.
+        # (LAPACK's partial solvers dsyevr/dsyevx for the few smallest are no faster at N = 16.)
+        w, V, info = lapack.dsyev(C)
+        # Eigenvalues come ascending; NaN anywhere (from a non-finite statistic) reaches the sum.
+        if info != 0 or not math.isfinite(w.sum() + V[:, 0].sum()):
+            return None
+        w = w[::-1] * (1.0 / n)  # of C = S/n, descending: lambda_1 >= ... >= lambda_N
+        if w[-1] < 0.0:
+            w = np.maximum(w, 0.0)  # clip round-off below zero (C is PSD)
+        v_N = V[:, 0]
+        tol = NULL_EIGENVALUE_RTOL * w[0]
+        num_null = 1 if w[-2] > tol else int((w <= tol).sum())
+        direction = v_N if T is None else T @ v_N
+        return EigenSolution(eigenvalues=w, v_N=v_N, direction=direction, num_null=num_null)
+
+    @staticmethod
+    def sample_error(A: np.ndarray, x: np.ndarray) -> float:
+        """``s_t = ||A_t x||^2``, Eq. (2): the error of one sample under an estimate ``x``."""
+        r = A @ x
+        return float(r @ r)
+
+    def mean_squared_error(self, x: np.ndarray) -> float:
+        """``S_t = x^T C_t x``, Eq. (3): the mean of ``s_t`` over the accumulated samples."""
+        n = self.weight
+        if n <= 0.0:
+            raise IdentificationError("no samples to compute a mean squared error from")
+        return float(x @ self._S @ x) / n
