@@ -50,9 +50,7 @@ def _read_table(path: str | Path, formats: tuple[tuple[str, ...], ...]) -> tuple
             header = tuple(c.lower() for c in cells)
             if header not in formats:
                 wanted = " or ".join(",".join(f) for f in formats)
-                raise RecordedDataError(
-                    f"{path}:{line_no}: header is '{','.join(cells)}', expected {wanted}"
-                )
+                raise RecordedDataError(f"{path}:{line_no}: header is '{','.join(cells)}', expected {wanted}")
             continue
         if len(cells) != len(header):
             raise RecordedDataError(

@@ -97,9 +97,7 @@ def eye_to_hand_residuals(X_WC: np.ndarray, p_HP: np.ndarray, p_C: np.ndarray, X
     return np.linalg.norm(p_W_cam - p_W_hand, axis=1)
 
 
-def calibrate_eye_to_hand(
-    p_C, X_WH, criteria: ConvergenceCriteria | None = None
-) -> EyeToHandResult:
+def calibrate_eye_to_hand(p_C, X_WH, criteria: ConvergenceCriteria | None = None) -> EyeToHandResult:
     """Eye-to-hand calibration from recorded data (paper §3.4, with conditioning and refinement).
 
     Args:
@@ -143,10 +141,17 @@ def calibrate_eye_to_hand(
     rms = float(np.sqrt(np.mean(residuals**2))) if len(residuals) else math.inf
     gap = solution.eigen.gap_ratio if solution.eigen is not None else 1.0
     return EyeToHandResult(
-        X_WC=X_WC, p_HP=p_HP, residuals=residuals, rms=rms,
-        eigenvalues=solution.eigenvalues, gap_ratio=gap, ssd=solution.ssd,
-        expected_rms=solution.expected_rms, verdict=solution.verdict,
-        projected=solution.projected, refined=solution.refined,
+        X_WC=X_WC,
+        p_HP=p_HP,
+        residuals=residuals,
+        rms=rms,
+        eigenvalues=solution.eigenvalues,
+        gap_ratio=gap,
+        ssd=solution.ssd,
+        expected_rms=solution.expected_rms,
+        verdict=solution.verdict,
+        projected=solution.projected,
+        refined=solution.refined,
     )
 
 
@@ -212,7 +217,12 @@ def identify_payload(
     torque_res = np.linalg.norm(tau - np.cross(solution.p_KCm, f), axis=1)
     gap = solution.eigen.gap_ratio if solution.eigen is not None else 1.0
     return PayloadResult(
-        mass=solution.mass, p_KCm=solution.p_KCm, force_residuals=force_res,
-        torque_residuals=torque_res, eigenvalues=solution.eigenvalues, gap_ratio=gap,
-        expected_rms=solution.expected_rms, verdict=solution.verdict,
+        mass=solution.mass,
+        p_KCm=solution.p_KCm,
+        force_residuals=force_res,
+        torque_residuals=torque_res,
+        eigenvalues=solution.eigenvalues,
+        gap_ratio=gap,
+        expected_rms=solution.expected_rms,
+        verdict=solution.verdict,
     )

@@ -166,11 +166,13 @@ def conditioning_transform(S: np.ndarray, out: np.ndarray | None = None) -> np.n
 
 
 # Flat indices of T's variable entries: the diagonal, the -c_mean block, the p_mean column.
-_T_FLAT = np.concatenate([
-    np.arange(N_UNKNOWNS) * (N_UNKNOWNS + 1),
-    (np.tile(np.arange(3), 3) + 9) * N_UNKNOWNS + np.arange(9),
-    np.arange(9, 12) * N_UNKNOWNS + 15,
-])
+_T_FLAT = np.concatenate(
+    [
+        np.arange(N_UNKNOWNS) * (N_UNKNOWNS + 1),
+        (np.tile(np.arange(3), 3) + 9) * N_UNKNOWNS + np.arange(9),
+        np.arange(9, 12) * N_UNKNOWNS + 15,
+    ]
+)
 
 
 def _jacobian(R: np.ndarray) -> np.ndarray:
@@ -183,8 +185,13 @@ def _jacobian(R: np.ndarray) -> np.ndarray:
 
 
 def refine(
-    S: np.ndarray, weight: float, R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray,
-    max_iterations: int = 30, tolerance: float = 1e-12,
+    S: np.ndarray,
+    weight: float,
+    R: np.ndarray,
+    p_WC: np.ndarray,
+    p_HP: np.ndarray,
+    max_iterations: int = 30,
+    tolerance: float = 1e-12,
 ) -> EyeToHandEstimate:
     """Gauss-Newton on SO(3) x R^3 x R^3 of ``J = x^T S x`` (the geometric least-squares cost
     ``sum ||R_WC p_CP + p_WC - R_WH p_HP - p_WH||^2``), from the statistic alone.
@@ -203,9 +210,13 @@ def refine(
             delta = -np.linalg.solve(H, g)
         except np.linalg.LinAlgError:
             delta = -np.linalg.lstsq(H, g, rcond=None)[0]
-        if not np.all(np.isfinite(delta)):
+        # A step of a million metres (or radians) only comes from a singular H: degenerate data.
+        if not np.abs(delta).max() < 1e6:
             break
-        step = 1.0
+        # Trust region on the rotation: a step beyond pi radians is meaningless on SO(3) (and only
+        # happens on degenerate data, where H is singular).
+        omega = math.sqrt(delta[0:3] @ delta[0:3])
+        step = 1.0 if omega <= math.pi else math.pi / omega
         for _ in range(20):
             R_new = R @ so3_exp(step * delta[0:3])
             p_WC_new = p_WC + step * delta[3:6]
@@ -227,7 +238,10 @@ def refine(
     R = U @ Vt
     x = pack_x(R, p_WC, p_HP)
     return EyeToHandEstimate(
-        R_WC=R, p_WC=p_WC.copy(), p_HP=p_HP.copy(), x=x,
+        R_WC=R,
+        p_WC=p_WC.copy(),
+        p_HP=p_HP.copy(),
+        x=x,
         mean_squared_error=float(x @ S @ x) / weight,
     )
 

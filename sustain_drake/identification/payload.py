@@ -176,7 +176,10 @@ class PayloadIdentifier:
             else:
                 mass = 1.0 / x[0]
         verdict = judge(
-            self.criteria, n, eigen, math.sqrt(expected_mse) if math.isfinite(expected_mse) else math.inf,
+            self.criteria,
+            n,
+            eigen,
+            math.sqrt(expected_mse) if math.isfinite(expected_mse) else math.inf,
             problem,
         )
         return PayloadSolution(eigen, mass, x[1:4].copy(), x, expected_mse, verdict, n)

@@ -82,6 +82,4 @@ def project_to_rotation(x9: np.ndarray) -> RotationProjection:
     ssq = s1 * s1 + s2 * s2 + s3 * s3
     if ssq <= 0.0:
         return RotationProjection(R=R, scale=0.0, ssd=float("inf"), sign=sign)
-    return RotationProjection(
-        R=R, scale=sign * ssum / ssq, ssd=max(3.0 - ssum * ssum / ssq, 0.0), sign=sign
-    )
+    return RotationProjection(R=R, scale=sign * ssum / ssq, ssd=max(3.0 - ssum * ssum / ssq, 0.0), sign=sign)

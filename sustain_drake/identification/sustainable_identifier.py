@@ -161,8 +161,7 @@ def judge(
     if not expected_rms <= criteria.max_expected_rms:
         return Verdict(
             False,
-            f"expected RMS error {expected_rms:.3g}{rms_unit} > "
-            f"{criteria.max_expected_rms:.3g}{rms_unit}",
+            f"expected RMS error {expected_rms:.3g}{rms_unit} > {criteria.max_expected_rms:.3g}{rms_unit}",
         )
     return Verdict(True, "converged")
 
@@ -256,12 +255,15 @@ class SustainableIdentifier:
             IdentificationError: ``A`` has the wrong width or is not finite. The state is then
                 unchanged.
         """
-        AtA = A.T @ A
+        # One scalar check catches NaN, inf and overflow in A^T A (a NaN or inf makes the sum
+        # non-finite), before anything is committed to the state; numpy's warnings are replaced by
+        # that one clear error.
+        with np.errstate(over="ignore", invalid="ignore"):
+            AtA = A.T @ A
+            total = AtA.sum()
         if AtA.shape != self._S.shape:
             raise IdentificationError(f"A_t must have {self._N} columns, got shape {A.shape}")
-        # One scalar check catches NaN, inf and overflow in A^T A (a NaN or inf makes the sum
-        # non-finite), before anything is committed to the state.
-        if not math.isfinite(AtA.sum()):
+        if not math.isfinite(total):
             raise IdentificationError("sample is not finite (NaN, inf or overflow)")
         if self._forgetting != 1.0:
             self._weighted *= self._forgetting

@@ -1,0 +1,146 @@
+"""``sustain-drake calibrate eye-to-hand``: offline calibration from recorded CSV data.
+
+Exit codes: 0 converged, 2 bad input (one line on stderr), 3 not converged (the reason on stderr;
+no YAML is written then, so an earlier good result is never overwritten by a bad one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from sustain_drake.cli.common import EXIT_NOT_CONVERGED, EXIT_OK, CliError, write_atomically
+from sustain_drake.identification import ConvergenceCriteria, IdentificationError, calibrate_eye_to_hand
+from sustain_drake.identification import eye_to_hand as eye_to_hand_formulation
+from sustain_drake.recorded_data import (
+    RecordedDataError,
+    eye_to_hand_yaml,
+    read_points_csv,
+    read_poses_csv,
+    rpy_degrees,
+)
+
+# A residual this many times the RMS is flagged (a mis-paired image and pose stands out so).
+OUTLIER_FACTOR = 3.0
+
+
+def register(subparsers) -> None:
+    calibrate = subparsers.add_parser("calibrate", help="calibrate from recorded data")
+    kinds = calibrate.add_subparsers(dest="kind", required=True)
+    p = kinds.add_parser(
+        "eye-to-hand",
+        help="camera pose in the world and a hand point, from one tracked point (paper §3.4)",
+        description="Eye-to-hand calibration from a fixed camera's 3-D measurements of one point on the "
+        "hand. CSV formats: see the README (points: x,y,z in metres in the camera frame; poses: "
+        "x,y,z,qw,qx,qy,qz or x,y,z,roll,pitch,yaw of the hand in the world).",
+    )
+    p.add_argument("--points", required=True, type=Path, help="CSV of the point in the camera frame (m)")
+    p.add_argument(
+        "--poses", required=True, type=Path, help="CSV of the hand poses X_WH (m, quaternion or rpy)"
+    )
+    p.add_argument("--out", type=Path, help="write the result as YAML (Drake Transform: m, rpy in deg)")
+    defaults = eye_to_hand_formulation.default_criteria()
+    p.add_argument(
+        "--max-rms",
+        type=float,
+        default=defaults.max_expected_rms,
+        help="criterion (a): largest expected RMS error, m (default %(default)s)",
+    )
+    p.add_argument(
+        "--min-gap",
+        type=float,
+        default=defaults.min_gap_ratio,
+        help="criterion (b): smallest lambda_15/lambda_16 (default %(default)s)",
+    )
+    p.add_argument(
+        "--max-ssd",
+        type=float,
+        default=defaults.max_ssd,
+        help="criterion (c): largest SSD to a rotation (default %(default)s)",
+    )
+    p.add_argument(
+        "--min-samples", type=int, default=defaults.min_samples, help="fewest samples (default %(default)s)"
+    )
+    p.set_defaults(handler=_run_eye_to_hand)
+
+
+def _criteria(args) -> ConvergenceCriteria:
+    try:
+        return ConvergenceCriteria(
+            max_expected_rms=args.max_rms,
+            min_gap_ratio=args.min_gap,
+            max_ssd=args.max_ssd,
+            min_samples=args.min_samples,
+        )
+    except ValueError as e:
+        raise CliError(str(e)) from None
+
+
+def run_eye_to_hand(
+    points: Path, poses: Path, out: Path | None, criteria: ConvergenceCriteria, stream=sys.stdout
+) -> int:
+    """Reads, calibrates, prints and (if converged) writes the YAML. Returns the exit code."""
+    try:
+        p_C = read_points_csv(points)
+        X_WH = read_poses_csv(poses)
+    except RecordedDataError as e:
+        raise CliError(str(e)) from None
+    if len(p_C) != len(X_WH):
+        raise CliError(
+            f"{points} has {len(p_C)} samples but {poses} has {len(X_WH)}: rows must pair one to one"
+        )
+    if len(p_C) < criteria.min_samples:
+        raise CliError(f"too few samples: {len(p_C)} rows, at least {criteria.min_samples} needed")
+    try:
+        result = calibrate_eye_to_hand(p_C, X_WH, criteria=criteria)
+    except IdentificationError as e:
+        raise CliError(str(e)) from None
+    print_eye_to_hand(result, points, poses, stream)
+    if not result.converged:
+        print(f"sustain-drake: {result.verdict}", file=sys.stderr)
+        if out is not None:
+            print(f"{out} not written (not converged)", file=stream)
+        return EXIT_NOT_CONVERGED
+    if out is not None:
+        try:
+            write_atomically(out, eye_to_hand_yaml(result, str(points), str(poses)))
+        except OSError as e:
+            raise CliError(f"{out}: cannot write: {e.strerror or e}") from None
+        print(f"wrote {out}", file=stream)
+    return EXIT_OK
+
+
+def print_eye_to_hand(result, points, poses, stream) -> None:
+    w = stream.write
+    n = len(result.residuals)
+    w(f"Eye-to-hand calibration (paper §3.4) of {n} samples\n  points: {points}\n  poses:  {poses}\n")
+    w(f"verdict: {result.verdict}\n")
+    if result.refined is None:
+        return
+    X = result.X_WC
+    w("camera pose in the world, X_WC:\n")
+    w("  translation [m]:  " + "  ".join(f"{v:+.6f}" for v in X[:3, 3]) + "\n")
+    w("  rpy [deg]:        " + "  ".join(f"{v:+.4f}" for v in rpy_degrees(X[:3, :3])) + "\n")
+    w("point in the hand, p_HP [m]: " + "  ".join(f"{v:+.6f}" for v in result.p_HP) + "\n")
+    proj = result.projected
+    dp = np.linalg.norm(proj.p_WC - X[:3, 3]) * 1e3
+    w(
+        f"residual RMS: {result.rms * 1e3:.3f} mm (the identification expected "
+        f"{result.expected_rms * 1e3:.3f} mm; Gauss-Newton moved the camera {dp:.2f} mm from the "
+        "projected TLS estimate)\n"
+    )
+    lam = result.eigenvalues
+    w(f"eigenvalue gap lambda_15/lambda_16: {result.gap_ratio:.4g}   SSD to a rotation: {result.ssd:.3g}\n")
+    w("lambda_13..lambda_16: " + "  ".join(f"{v:.4g}" for v in lam[-4:]) + "\n")
+    w("per-sample residuals [mm]:\n")
+    limit = OUTLIER_FACTOR * result.rms
+    for i, r in enumerate(result.residuals, start=1):
+        flag = "   <-- large: check this sample's pairing" if r > limit else ""
+        w(f"  {i:4d}  {r * 1e3:8.3f}{flag}\n")
+
+
+def _run_eye_to_hand(args: argparse.Namespace) -> int:
+    return run_eye_to_hand(args.points, args.poses, args.out, _criteria(args))

@@ -1,0 +1,198 @@
+"""Eye-to-hand formulation (§3.4) with the §3.2 projection, conditioning and refinement."""
+
+import math
+
+import numpy as np
+import pytest
+from eye_to_hand_data import make_samples, make_truth, rotation_error_deg
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from sustain_drake.identification import (
+    EyeToHandIdentifier,
+    IdentificationError,
+    calibrate_eye_to_hand,
+)
+from sustain_drake.identification.eye_to_hand import build_A, conditioning_transform, pack_x
+from sustain_drake.identification.rotation import project_to_rotation
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_noise_free_is_exact(seed):
+    truth = make_truth(seed)
+    p_C, X_WH = make_samples(truth, 20, seed=seed + 10)
+    result = calibrate_eye_to_hand(p_C, X_WH)
+    assert result.converged, result.verdict
+    for est in (result.projected, result.refined):
+        assert np.abs(est.X_WC - truth.X_WC).max() < 1e-9
+        assert np.abs(est.p_HP - truth.p_HP).max() < 1e-9
+    assert result.rms < 1e-9
+
+
+def test_one_mm_noise_300_samples():
+    truth = make_truth(5)
+    p_C, X_WH = make_samples(truth, 300, noise_m=1e-3, seed=6)
+    result = calibrate_eye_to_hand(p_C, X_WH)
+    assert result.converged, result.verdict
+    assert rotation_error_deg(result.X_WC[:3, :3], truth.X_WC[:3, :3]) <= 0.1
+    assert np.linalg.norm(result.X_WC[:3, 3] - truth.X_WC[:3, 3]) <= 1e-3
+    assert np.linalg.norm(result.p_HP - truth.p_HP) <= 1e-3
+    # 1 mm per axis: the 3-D residual RMS is about sqrt(3) mm.
+    assert result.rms == pytest.approx(math.sqrt(3) * 1e-3, rel=0.15)
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-3])
+def test_pure_translation_never_converges(noise):
+    truth = make_truth(7)
+    p_C, X_WH = make_samples(truth, 500, noise_m=noise, rotate=False, seed=8)
+    ident = EyeToHandIdentifier()
+    for i, (c, X) in enumerate(zip(p_C, X_WH, strict=True)):
+        ident.add(c, X[:3, :3], X[:3, 3])
+        if i % 50 == 49:
+            solution = ident.solve()
+            assert not solution.verdict.converged
+            assert "motion not rich enough" in solution.verdict.reason
+            assert solution.eigen.num_null >= 2
+
+
+def test_too_few_samples_is_not_converged():
+    truth = make_truth(9)
+    p_C, X_WH = make_samples(truth, 6, seed=10)
+    result = calibrate_eye_to_hand(p_C, X_WH)
+    assert not result.converged
+    assert result.verdict.reason.startswith("too few samples")
+
+
+def test_sign_of_v_N_does_not_matter():
+    truth = make_truth(11)
+    p_C, X_WH = make_samples(truth, 50, noise_m=5e-4, seed=12)
+    ident = EyeToHandIdentifier()
+    for c, X in zip(p_C, X_WH, strict=True):
+        ident.add(c, X[:3, :3], X[:3, 3])
+    direction = ident.core.eigen(conditioning_transform(ident.core.S)).direction
+    plus, minus = project_to_rotation(direction[:9]), project_to_rotation(-direction[:9])
+    assert np.allclose(plus.R, minus.R, atol=1e-14)
+    assert np.linalg.det(plus.R) == pytest.approx(1.0)
+    assert plus.ssd == pytest.approx(minus.ssd)
+    assert np.allclose(plus.scale * direction, minus.scale * -direction, atol=1e-14)
+    assert plus.sign == -minus.sign
+
+
+def test_projection_of_a_reflection_is_a_proper_rotation():
+    R = Rotation.random(random_state=3).as_matrix()
+    reflection = R @ np.diag([1.0, 1.0, -1.0])  # det -1
+    p = project_to_rotation(reflection.ravel(order="F"))
+    assert np.linalg.det(p.R) == pytest.approx(1.0)
+    assert np.allclose(p.R.T @ p.R, np.eye(3), atol=1e-12)
+    # A scaled rotation projects to itself with the inverse scale and SSD 0.
+    q = project_to_rotation((-2.5 * R).ravel(order="F"))
+    assert np.allclose(q.R, R, atol=1e-12) and q.scale == pytest.approx(-0.4) and q.ssd < 1e-12
+
+
+def test_refinement_from_the_statistic_equals_least_squares_on_the_samples():
+    """The Gauss-Newton refinement runs from C alone; it must reach the same optimum as a
+    least-squares solver that keeps every sample."""
+    truth = make_truth(13)
+    p_C, X_WH = make_samples(truth, 80, noise_m=2e-3, seed=14)
+    result = calibrate_eye_to_hand(p_C, X_WH)
+
+    def residuals(theta):
+        R = Rotation.from_rotvec(theta[:3]).as_matrix()
+        r = p_C @ R.T + theta[3:6] - np.einsum("nij,j->ni", X_WH[:, :3, :3], theta[6:9]) - X_WH[:, :3, 3]
+        return r.ravel()
+
+    start = np.concatenate([Rotation.from_matrix(truth.X_WC[:3, :3]).as_rotvec(), truth.X_WC[:3, 3],
+                            truth.p_HP])  # fmt: skip
+    ls = least_squares(residuals, start, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    R_ls = Rotation.from_rotvec(ls.x[:3]).as_matrix()
+    assert rotation_error_deg(result.X_WC[:3, :3], R_ls) < 1e-6
+    assert np.abs(result.X_WC[:3, 3] - ls.x[3:6]).max() < 1e-8
+    assert np.abs(result.p_HP - ls.x[6:9]).max() < 1e-8
+
+
+def test_conditioning_transform_maps_the_normalised_problem():
+    """A_t x = s A'_t x' with x = T x' (T includes 1/s): T^T C T is the statistic of A'_t / ... ."""
+    truth = make_truth(15)
+    p_C, X_WH = make_samples(truth, 40, noise_m=1e-3, seed=16)
+    ident = EyeToHandIdentifier()
+    for c, X in zip(p_C, X_WH, strict=True):
+        ident.add(c, X[:3, :3], X[:3, 3])
+    T = conditioning_transform(ident.core.S)
+    c_mean = p_C.mean(axis=0)
+    s = math.sqrt(np.mean(np.sum((p_C - c_mean) ** 2, axis=1)))
+    p_mean = X_WH[:, :3, 3].mean(axis=0)
+    for c, X in zip(p_C[:5], X_WH[:5], strict=True):
+        A_norm = build_A((c - c_mean) / s, X[:3, :3], (X[:3, 3] - p_mean) / s)
+        assert np.allclose(build_A(c, X[:3, :3], X[:3, 3]) @ T, A_norm, atol=1e-12)
+
+
+def test_sample_error_and_state_clone():
+    truth = make_truth(17)
+    p_C, X_WH = make_samples(truth, 30, noise_m=1e-3, seed=18)
+    ident = EyeToHandIdentifier()
+    for c, X in zip(p_C, X_WH, strict=True):
+        ident.add_pose(c, X)
+    clone = EyeToHandIdentifier()
+    clone.set_state(ident.state)
+    a, b = ident.solve(), clone.solve()
+    assert np.array_equal(a.estimate.X_WC, b.estimate.X_WC)
+    est = a.estimate
+    s = ident.sample_error(p_C[0], X_WH[0, :3, :3], X_WH[0, :3, 3], est)
+    A = build_A(p_C[0], X_WH[0, :3, :3], X_WH[0, :3, 3])
+    assert s == pytest.approx(np.sum((A @ pack_x(est.R_WC, est.p_WC, est.p_HP)) ** 2))
+    # A sample 5 cm off is flagged by its error.
+    assert ident.sample_error(p_C[0] + [0.05, 0, 0], X_WH[0, :3, :3], X_WH[0, :3, 3], est) > 1e-3
+
+
+finite = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False, allow_infinity=False)
+anything = st.floats(allow_nan=True, allow_infinity=True)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    samples=st.lists(
+        st.tuples(
+            st.lists(st.one_of(finite, anything), min_size=3, max_size=3),
+            st.lists(finite, min_size=4, max_size=4),
+            st.lists(st.one_of(finite, anything), min_size=3, max_size=3),
+        ),
+        max_size=25,
+    ),
+    forgetting=st.sampled_from([1.0, 0.9, 0.5]),
+)
+def test_random_streams_never_give_nan_or_undocumented_errors(samples, forgetting):
+    ident = EyeToHandIdentifier(forgetting_factor=forgetting)
+    for c, q, p in samples:
+        q = np.array(q)
+        R = Rotation.from_quat(q).as_matrix() if np.linalg.norm(q) > 1e-6 else np.eye(3)
+        try:
+            ident.add(np.array(c), R, np.array(p))
+        except IdentificationError:
+            assert not (np.all(np.isfinite(c)) and np.all(np.isfinite(p)) and max(map(abs, c + p)) < 1e100)
+        solution = ident.solve()
+        assert isinstance(solution.verdict.converged, bool) and solution.verdict.reason
+        assert np.all(np.isfinite(solution.eigenvalues))
+        if solution.estimate is not None:
+            assert np.all(np.isfinite(solution.estimate.X_WC))
+            assert np.all(np.isfinite(solution.estimate.p_HP))
+            assert math.isfinite(solution.estimate.mean_squared_error)
+            assert np.linalg.det(solution.estimate.R_WC) == pytest.approx(1.0, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("p_C", "X_WH", "message"),
+    [
+        (np.zeros((5, 2)), np.tile(np.eye(4), (5, 1, 1)), r"p_C must have shape \(n, 3\)"),
+        (np.zeros((5, 3)), np.tile(np.eye(4), (4, 1, 1)), "must pair one to one"),
+        (np.full((5, 3), np.nan), np.tile(np.eye(4), (5, 1, 1)), "not finite"),
+        (np.zeros((5, 3)), np.tile(np.diag([1.0, 1.0, 2.0, 1.0]), (5, 1, 1)), r"X_WH\[0\] is not a rotation"),
+        (np.zeros((5, 3)), np.tile(np.diag([1.0, 1.0, -1.0, 1.0]), (5, 1, 1)), "not a rotation"),
+        (np.zeros((5, 3)), np.tile(np.eye(4) + np.eye(4, k=-3), (5, 1, 1)), "last row"),
+        ([["a", "b", "c"]], np.tile(np.eye(4), (1, 1, 1)), "not a numeric array"),
+    ],
+)
+def test_batch_input_errors(p_C, X_WH, message):
+    with pytest.raises(IdentificationError, match=message):
+        calibrate_eye_to_hand(p_C, X_WH)
