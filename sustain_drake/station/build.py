@@ -1,0 +1,273 @@
+"""``build_station(scenario)``: the simulated world of the paper's experiments as a Diagram."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.geometry import (
+    MakeRenderEngineVtk,
+    Meshcat,
+    MeshcatVisualizer,
+    MeshcatVisualizerParams,
+    RenderEngineVtkParams,
+)
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import GetScopedFrameByName
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
+from pydrake.multibody.tree import (
+    PdControllerGains,
+    PrismaticJoint,
+    RevoluteJoint,
+    SpatialInertia,
+)
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import AffineSystem, MatrixGain
+from pydrake.systems.sensors import RgbdSensor
+
+from sustain_drake.station.models import make_parser, model_file
+from sustain_drake.station.scenario import (
+    ARM_JOINTS,
+    HEAD_JOINTS,
+    HeadMove,
+    Scenario,
+    ToolSlip,
+    Touch,
+    validate_scenario,
+)
+from sustain_drake.systems.camera_sampler import RgbdCameraSampler
+from sustain_drake.systems.depth_noise import DepthNoiseModel
+from sustain_drake.systems.distractor import DistractorPath
+from sustain_drake.systems.disturbances import DisturbanceScheduler, Push, Step
+from sustain_drake.systems.ground_truth import GroundTruth, PointMass
+from sustain_drake.systems.motion_generator import MotionGenerator
+from sustain_drake.systems.wrench_sensor import WristWrenchSensor
+
+# Where the fixed furniture stands (world frame: origin at the arm's foot on the table top).
+X_W_TABLE = RigidTransform([0.25, 0.0, 0.0])
+TOOL_FILES = {"rod": "rod_tool.sdf", "box": "box_tool.sdf"}
+# The grip is two stiff PD joints (slide along the grasp z, pivot about the closing axis x):
+# a tool slip is a fast move of these joints to new set points.
+GRIP_GAINS = {"tool_slide": PdControllerGains(p=2.0e4, d=200.0),
+              "tool_pivot": PdControllerGains(p=500.0, d=5.0)}
+SENSOR_JOINT = "ft_sensor"
+HAND_BODY = "gripper"
+
+EXPORTED_OUTPUTS = (
+    "joint_positions", "joint_velocities", "head_joint_positions", "X_WH", "wrench",
+    "color_image", "depth_image", "label_image", "image_time",
+    "true_X_WC", "true_p_HP", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
+    "true_p_KCo",
+)
+
+
+def _selector(plant: MultibodyPlant, joints, velocities: bool) -> np.ndarray:
+    """Rows picking the joints' positions (or velocities) out of the plant's full state."""
+    nq = plant.num_positions()
+    rows = np.zeros((len(joints), nq + plant.num_velocities()))
+    for i, name in enumerate(joints):
+        joint = plant.GetJointByName(name)
+        rows[i, nq + joint.velocity_start() if velocities else joint.position_start()] = 1.0
+    return rows
+
+
+def _add_grip(plant: MultibodyPlant, scenario: Scenario, arm, tool_instance):
+    """Holds the tool in the grasp frame G through the two slip joints (see GRIP_GAINS)."""
+    tiny = SpatialInertia.SolidSphereWithMass(1e-3, 0.005)
+    slide_link = plant.AddRigidBody("tool_slide_link", tool_instance, tiny)
+    pivot_link = plant.AddRigidBody("tool_pivot_link", tool_instance, tiny)
+    grasp = plant.GetFrameByName("grasp", arm)
+    slide = plant.AddJoint(PrismaticJoint(
+        "tool_slide", grasp, slide_link.body_frame(), [0.0, 0.0, 1.0]))
+    pivot = plant.AddJoint(RevoluteJoint(
+        "tool_pivot", slide_link.body_frame(), pivot_link.body_frame(), [1.0, 0.0, 0.0]))
+    slide.set_default_translation(scenario.tool.slide)
+    pivot.set_default_angle(scenario.tool.pivot)
+    tool_body = plant.GetBodyByName("tool", tool_instance)
+    plant.WeldFrames(pivot_link.body_frame(), tool_body.body_frame(),
+                     scenario.tool.X_GT.GetDeterministicValue())
+    for joint in (slide, pivot):
+        actuator = plant.AddJointActuator(joint.name(), joint)
+        actuator.set_controller_gains(GRIP_GAINS[joint.name()])
+    return tool_body
+
+
+def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram:
+    """Builds the world of ``scenario`` as a Diagram named ``station``.
+
+    Exported outputs: see ``EXPORTED_OUTPUTS`` and the README's Simulation section (the
+    camera ports exist only when the scenario's camera renders them). Exported inputs:
+    ``motion_pause`` and ``motion_confirm`` (the MotionGenerator's requests). With a
+    ``meshcat``, the scene is also drawn there (illustration geometry).
+    """
+    validate_scenario(scenario)
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
+    parser = make_parser(plant)
+    arm = parser.AddModels(model_file("arm.sdf"))[0]
+    head = parser.AddModels(model_file("head.sdf"))[0]
+    table = parser.AddModels(model_file("table.sdf"))[0]
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("arm_base", arm))
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table), X_W_TABLE)
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("head_post", head),
+                     scenario.head.X_WP.GetDeterministicValue())
+    person = None
+    if scenario.distractor.enabled:
+        person = parser.AddModels(model_file("person.sdf"))[0]
+    tool_instance = tool_body = None
+    if scenario.tool.model != "none":
+        tool_instance = parser.AddModels(model_file(TOOL_FILES[scenario.tool.model]))[0]
+        tool_body = _add_grip(plant, scenario, arm, tool_instance)
+
+    # The initial state is the scenario's: arm posture, closed gripper, head angles, path start.
+    posture = np.clip(scenario.motion.initial_posture,
+                      [plant.GetJointByName(j).position_lower_limits()[0] for j in ARM_JOINTS],
+                      [plant.GetJointByName(j).position_upper_limits()[0] for j in ARM_JOINTS])
+    for name, angle in zip(ARM_JOINTS, posture, strict=True):
+        plant.GetJointByName(name).set_default_angle(angle)
+    plant.GetJointByName("gripper_joint").set_default_translation(scenario.tool.gripper_position)
+    plant.GetJointByName("head_pan").set_default_angle(scenario.head.pan)
+    plant.GetJointByName("head_tilt").set_default_angle(scenario.head.tilt)
+    plant.Finalize()
+
+    # Babbling arm: 5 joints from the motion generator, the gripper held closed.
+    m = scenario.motion
+    lower = [max(r[0], plant.GetJointByName(j).position_lower_limits()[0])
+             for r, j in zip(m.joint_ranges, ARM_JOINTS, strict=True)]
+    upper = [min(r[1], plant.GetJointByName(j).position_upper_limits()[0])
+             for r, j in zip(m.joint_ranges, ARM_JOINTS, strict=True)]
+    motion = builder.AddSystem(MotionGenerator(
+        lower, upper, posture, seed=m.seed, max_speed=m.max_speed,
+        min_duration=m.min_duration, dwell=m.dwell, period=m.period))
+    motion.set_name("motion_generator")
+    n = len(ARM_JOINTS)
+    # The arm instance's desired state is [q_1..q_5, q_grip, v_1..v_5, v_grip].
+    D = np.zeros((2 * n + 2, 2 * n))
+    D[:n, :n] = np.eye(n)
+    D[n + 1:2 * n + 1, n:] = np.eye(n)
+    y0 = np.zeros(2 * n + 2)
+    y0[n] = scenario.tool.gripper_position
+    arm_desired = builder.AddSystem(AffineSystem(D=D, y0=y0))
+    arm_desired.set_name("arm_desired_state")
+    builder.Connect(motion.get_output_port(), arm_desired.get_input_port())
+    builder.Connect(arm_desired.get_output_port(), plant.get_desired_state_input_port(arm))
+    builder.ExportInput(motion.GetInputPort("pause"), "motion_pause")
+    builder.ExportInput(motion.GetInputPort("confirm"), "motion_confirm")
+
+    # Disturbances: head moves, tool slips, touches.
+    events = scenario.disturbances
+    scheduler = builder.AddSystem(DisturbanceScheduler(
+        head_initial=[scenario.head.pan, scenario.head.tilt],
+        head_steps=[Step(e.time, (e.pan, e.tilt), e.duration)
+                    for e in events if isinstance(e, HeadMove)],
+        tool_initial=[scenario.tool.slide, scenario.tool.pivot],
+        tool_steps=[Step(e.time, (e.slide, e.pivot), e.duration)
+                    for e in events if isinstance(e, ToolSlip)],
+        pushes=[Push(e.time, e.duration, tuple(e.p_TQ), tuple(e.f_T))
+                for e in events if isinstance(e, Touch)],
+        tool_body=None if tool_body is None else tool_body.index()))
+    scheduler.set_name("disturbances")
+    builder.Connect(scheduler.GetOutputPort("head_desired_state"),
+                    plant.get_desired_state_input_port(head))
+    if tool_instance is not None:
+        builder.Connect(scheduler.GetOutputPort("tool_desired_state"),
+                        plant.get_desired_state_input_port(tool_instance))
+    builder.Connect(scheduler.GetOutputPort("applied_forces"),
+                    plant.get_applied_spatial_force_input_port())
+    builder.Connect(plant.get_body_poses_output_port(), scheduler.GetInputPort("body_poses"))
+
+    if person is not None:
+        d = scenario.distractor
+        path = builder.AddSystem(DistractorPath(d.waypoints, d.speed, d.start_time, d.loop))
+        path.set_name("distractor_path")
+        start = path.state_at(0.0)
+        for name, value in zip(("person_x_joint", "person_y_joint"), start[:2], strict=True):
+            plant.GetJointByName(name).set_default_translation(value)
+        plant.GetJointByName("person_yaw").set_default_angle(start[2])
+        builder.Connect(path.get_output_port(), plant.get_desired_state_input_port(person))
+
+    # Proprioception.
+    for name, joints, velocities in (("joint_positions", ARM_JOINTS, False),
+                                     ("joint_velocities", ARM_JOINTS, True),
+                                     ("head_joint_positions", HEAD_JOINTS, False)):
+        gain = builder.AddSystem(MatrixGain(_selector(plant, joints, velocities)))
+        gain.set_name(name)
+        builder.Connect(plant.get_state_output_port(), gain.get_input_port())
+        builder.ExportOutput(gain.get_output_port(), name)
+
+    # Wrist force/torque sensor on the weld.
+    w = scenario.wrench_sensor
+    sensor_joint = plant.GetJointByName(SENSOR_JOINT)
+    wrench = builder.AddSystem(WristWrenchSensor(
+        sensor_joint.index(), 1.0 / w.rate, w.force_noise, w.torque_noise, w.bias, w.seed))
+    wrench.set_name("wrench_sensor")
+    builder.Connect(plant.get_reaction_forces_output_port(), wrench.get_input_port())
+    builder.ExportOutput(wrench.get_output_port(), "wrench")
+
+    # RGB-D camera on the head.
+    cam = scenario.camera
+    camera_frame = (GetScopedFrameByName(plant, cam.X_PB.base_frame)
+                    if cam.X_PB.base_frame else plant.world_frame())
+    X_BS = camera_frame.GetFixedPoseInBodyFrame() @ cam.X_PB.GetDeterministicValue()
+    if cam.rgb or cam.depth or cam.label:
+        _add_camera(builder, plant, scene_graph, scenario, camera_frame.body(), X_BS)
+
+    # Hand pose and ground truth.
+    hand = plant.GetBodyByName(HAND_BODY)
+    X_HK = sensor_joint.frame_on_child().GetFixedPoseInBodyFrame()
+    wrist_roll = plant.GetJointByName(ARM_JOINTS[-1])
+    outboard = [b for b in plant.GetBodiesKinematicallyAffectedBy([wrist_roll.index()])
+                if b != wrist_roll.child_body().index()]
+    tracked = (plant.GetFrameByName("tracked_point", tool_instance) if tool_instance is not None
+               else plant.GetFrameByName("grasp", arm))
+
+    def point_mass(body):
+        return PointMass(int(body.index()), body.default_mass(), tuple(body.default_com()))
+
+    truth = builder.AddSystem(GroundTruth(
+        hand_body=hand.index(), X_HK=X_HK, camera_body=camera_frame.body().index(),
+        X_BC=X_BS @ cam.X_BC.GetDeterministicValue(),
+        tool_body=tracked.body().index(),
+        p_TP=tracked.GetFixedPoseInBodyFrame().translation(),
+        tool=None if tool_body is None else point_mass(tool_body),
+        outboard=[point_mass(plant.get_body(b)) for b in outboard]))
+    truth.set_name("ground_truth")
+    builder.Connect(plant.get_body_poses_output_port(), truth.get_input_port())
+    for port in ("X_WH", "true_X_WC", "true_p_HP", "true_tool_mass", "true_p_KCm",
+                 "true_outboard_mass", "true_p_KCo"):
+        builder.ExportOutput(truth.GetOutputPort(port), port)
+
+    if meshcat is not None:
+        # Illustration geometry only, at the camera's rate: enough for a replay, and cheap.
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, MeshcatVisualizerParams(
+            publish_period=1.0 / 30.0))
+    diagram = builder.Build()
+    diagram.set_name("station")
+    return diagram
+
+
+def _add_camera(builder, plant, scene_graph, scenario: Scenario, body, X_BS) -> None:
+    """The RGB-D camera at ``X_BS`` on ``body``: a continuous ``RgbdSensor`` read once per frame
+    by a sampler, so each image the scenario asks for is rendered once per frame."""
+    cam = scenario.camera
+    if not scene_graph.HasRenderer(cam.renderer_name):
+        rgba = cam.background
+        scene_graph.AddRenderer(cam.renderer_name, MakeRenderEngineVtk(
+            RenderEngineVtkParams(default_clear_color=[rgba.r(), rgba.g(), rgba.b()])))
+    color_camera, depth_camera = cam.MakeCameras()
+    sensor = builder.AddSystem(RgbdSensor(
+        plant.GetBodyFrameIdOrThrow(body.index()), X_BS, color_camera, depth_camera))
+    sensor.set_name("rgbd_sensor")
+    builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+    images = [name for name, wanted in (("color_image", cam.rgb), ("depth_image", cam.depth),
+                                        ("label_image", cam.label)) if wanted]
+    noise = scenario.depth_noise
+    sampler = builder.AddSystem(RgbdCameraSampler(
+        cam.fps, images,
+        DepthNoiseModel(noise.a, noise.b, noise.z0) if noise.enabled else None, noise.seed))
+    sampler.set_name("camera")
+    sources = {"color_image": sensor.color_image_output_port(),
+               "depth_image": sensor.depth_image_32F_output_port(),
+               "label_image": sensor.label_image_output_port()}
+    for name in images:
+        builder.Connect(sources[name], sampler.GetInputPort(name))
+        builder.ExportOutput(sampler.GetOutputPort(name), name)
+    builder.ExportOutput(sampler.GetOutputPort("image_time"), "image_time")

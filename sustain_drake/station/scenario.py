@@ -1,0 +1,284 @@
+"""Scenario files: dataclasses loaded from YAML with Drake's ``yaml_load_typed``.
+
+A scenario says everything about one simulated experiment (paper section 4): the plant, the
+RGB-D camera on the pan-tilt head, the held tool, the motion generator, the sensors' noise, the
+walking distractor and a timeline of disturbances. Every field has a default, so a scenario
+file only lists what differs; a key that is not in the schema is an error that names the key
+(see ``load_scenario``). Units are SI (m, s, rad, kg, N, N m).
+"""
+
+
+import dataclasses
+import math
+import re
+from dataclasses import field
+from pathlib import Path
+
+from pydrake.common.schema import Transform
+from pydrake.common.yaml import yaml_load_typed
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.sensors import CameraConfig
+
+ARM_JOINTS = ("arm_joint1", "arm_joint2", "arm_joint3", "arm_joint4", "arm_joint5")
+HEAD_JOINTS = ("head_pan", "head_tilt")
+TOOL_MODELS = ("rod", "box", "none")
+
+
+class ScenarioError(ValueError):
+    """A scenario file or value that cannot be used; the message is one line for the user."""
+
+
+def _default_plant_config() -> MultibodyPlantConfig:
+    # 2 ms steps: PD actuators are implicit in the discrete (SAP) solver, so this is stable,
+    # and it keeps the simulation well ahead of real time.
+    return MultibodyPlantConfig(time_step=0.002, discrete_contact_approximation="lagged")
+
+
+def _default_camera() -> CameraConfig:
+    camera = CameraConfig()
+    camera.name = "head_camera"
+    camera.fps = 30.0
+    camera.rgb = True
+    camera.depth = True
+    camera.label = True
+    camera.renderer_name = "vtk"
+    camera.z_near = 0.1
+    camera.z_far = 5.0
+    camera.X_PB = Transform()
+    camera.X_PB.base_frame = "head::camera_mount"
+    return camera
+
+
+@dataclasses.dataclass
+class HeadConfig:
+    """The pan-tilt head: where its post stands and its initial joint angles."""
+
+    # Pose of the post's foot in the world; its +x is the head's forward direction. The
+    # default puts the head 1.4 m in front of the arm, looking back at it.
+    X_WP: Transform = field(default_factory=lambda: Transform(
+        RigidTransform(RollPitchYaw(0.0, 0.0, math.pi), [1.4, 0.0, 0.0])))
+    pan: float = 0.0
+    tilt: float = 0.3
+
+
+@dataclasses.dataclass
+class ToolConfig:
+    """Which tool is held and its pose in the gripper's grasp frame G."""
+
+    model: str = "rod"  # "rod" (0.3 m, 0.1 kg), "box" (0.6 kg) or "none"
+    # Pose of the tool frame T in the grasp frame G (between the fingers, z along approach).
+    X_GT: Transform = field(default_factory=Transform)
+    # Initial slip state (see ToolSlip): translation along G's z and rotation about G's x.
+    slide: float = 0.0
+    pivot: float = 0.0
+    # The gripper finger's closed position on this tool (m, 0 = open).
+    gripper_position: float = 0.0225
+
+
+@dataclasses.dataclass
+class MotionConfig:
+    """The babbling motion generator (smooth random joint-space moves within ranges)."""
+
+    seed: int = 0
+    # Per arm joint [lower, upper] in rad; clipped to the joint limits of the model.
+    joint_ranges: list[list[float]] = field(default_factory=lambda: [
+        [-0.8, 0.8], [0.2, 1.0], [0.6, 1.6], [-0.4, 1.2], [-1.5, 1.5]])
+    initial_posture: list[float] = field(default_factory=lambda: [0.0, 0.6, 1.1, 0.5, 0.0])
+    max_speed: float = 0.6  # rad/s, the peak joint speed of a move (the pace)
+    min_duration: float = 1.0  # s, the shortest move
+    dwell: float = 0.0  # s of rest after each move (quasi-static identification)
+    period: float = 0.01  # s between the generator's updates
+
+
+@dataclasses.dataclass
+class WrenchSensorConfig:
+    """The wrist force/torque sensor; noise like an ATI Mini40."""
+
+    rate: float = 100.0  # Hz, sample rate of the reading
+    force_noise: float = 0.02  # N, standard deviation per axis
+    torque_noise: float = 0.0005  # N m, standard deviation per axis
+    # Constant offset added to the reading, [tau_x, tau_y, tau_z, f_x, f_y, f_z] (N m, N).
+    bias: list[float] = field(default_factory=lambda: [0.0] * 6)
+    seed: int = 1
+
+
+@dataclasses.dataclass
+class DepthNoiseConfig:
+    """Depth noise that grows with range, sigma(z) = a + b (z - z0)^2, as measured for
+    structured-light RGB-D sensors (Nguyen et al. 2012: a = 1.2 mm, b = 1.9 mm/m^2,
+    z0 = 0.4 m). Set ``enabled: false`` for exact depth."""
+
+    enabled: bool = True
+    a: float = 0.0012
+    b: float = 0.0019
+    z0: float = 0.4
+    seed: int = 2
+
+
+@dataclasses.dataclass
+class DistractorConfig:
+    """The walking person: a scripted path of floor waypoints walked at constant speed."""
+
+    enabled: bool = True
+    # [x, y] waypoints on the floor (world frame, m). The default crosses behind the arm.
+    waypoints: list[list[float]] = field(default_factory=lambda: [[-1.0, -2.5], [-1.0, 2.5]])
+    speed: float = 1.0  # m/s
+    start_time: float = 2.0  # s; the person waits at the first waypoint before
+    loop: bool = True  # walk back and forth along the path forever
+
+
+@dataclasses.dataclass
+class ToolSlip:
+    """At ``time`` the tool slips in the gripper, within ``duration``, to a new slip state:
+    ``slide`` (m) along the grasp frame's z and ``pivot`` (rad) about its x (the finger
+    closing axis), measured from the tool's configured pose X_GT."""
+
+    time: float = 0.0
+    slide: float = 0.0
+    pivot: float = 0.0
+    duration: float = 0.1
+
+
+@dataclasses.dataclass
+class HeadMove:
+    """At ``time`` the head turns, within ``duration``, to new pan/tilt angles (rad)."""
+
+    time: float = 0.0
+    pan: float = 0.0
+    tilt: float = 0.3
+    duration: float = 0.5
+
+
+@dataclasses.dataclass
+class Touch:
+    """From ``time`` for ``duration`` a force ``f_T`` (N, in the tool frame T, so it keeps
+    pushing on the same face while the arm moves) pushes the held tool at the point ``p_TQ``
+    (m, tool frame), like a finger touching it."""
+
+    time: float = 0.0
+    duration: float = 1.0
+    p_TQ: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    f_T: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+
+Disturbance = ToolSlip | HeadMove | Touch
+
+
+@dataclasses.dataclass
+class Scenario:
+    """One simulated experiment. ``duration`` is the default length of ``simulate``."""
+
+    duration: float = 10.0
+    plant_config: MultibodyPlantConfig = field(default_factory=_default_plant_config)
+    camera: CameraConfig = field(default_factory=_default_camera)
+    head: HeadConfig = field(default_factory=HeadConfig)
+    tool: ToolConfig = field(default_factory=ToolConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    wrench_sensor: WrenchSensorConfig = field(default_factory=WrenchSensorConfig)
+    depth_noise: DepthNoiseConfig = field(default_factory=DepthNoiseConfig)
+    distractor: DistractorConfig = field(default_factory=DistractorConfig)
+    disturbances: list[ToolSlip | HeadMove | Touch] = field(default_factory=list)
+
+
+def load_scenario(filename: str | Path) -> Scenario:
+    """Loads and checks a scenario file; every problem is a one-line ``ScenarioError``."""
+    path = Path(filename)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: no such scenario file")
+    try:
+        scenario = yaml_load_typed(schema=Scenario, filename=str(path))
+    except Exception as e:  # yaml_load_typed raises RuntimeError/ValueError/yaml errors
+        raise ScenarioError(f"{path}: {_one_line(e)}") from None
+    try:
+        validate_scenario(scenario)
+    except ScenarioError as e:
+        raise ScenarioError(f"{path}: {e}") from None
+    return scenario
+
+
+def load_scenario_string(data: str, name: str = "<string>") -> Scenario:
+    """Like ``load_scenario`` for YAML text (tests, embedding)."""
+    try:
+        scenario = yaml_load_typed(schema=Scenario, data=data)
+    except Exception as e:
+        raise ScenarioError(f"{name}: {_one_line(e)}") from None
+    validate_scenario(scenario)
+    return scenario
+
+
+def _one_line(error: Exception) -> str:
+    message = " ".join(str(error).split())
+    # yaml_load_typed says "The fields ['fooo'] were unknown to the schema".
+    unknown = re.search(r"The fields \[(.*?)\] were unknown", message)
+    if unknown:
+        return f"unknown key(s) {unknown.group(1)} (misspelled?)"
+    tag = re.search(r"type tag value '(.*?)' did not match any of the allowed type options "
+                    r"for '(.*?)' \((.*)\)", message)
+    if tag:
+        allowed = ", ".join("!" + n for n in re.findall(r"\.(\w+)'>", tag.group(3)))
+        return f"unknown tag !{tag.group(1)} (expected one of {allowed})"
+    if "incompatible function arguments" in message or "incompatible constructor" in message:
+        return "a value has the wrong type or length (e.g. a translation needs 3 numbers)"
+    return message if len(message) <= 300 else message[:297] + "..."
+
+
+def _check(condition: bool, message: str) -> None:
+    if not condition:
+        raise ScenarioError(message)
+
+
+def _finite(values, name: str) -> None:
+    _check(all(math.isfinite(float(v)) for v in values), f"{name} must be finite numbers")
+
+
+def validate_scenario(s: Scenario) -> None:
+    """Rejects values the simulation cannot use, so no NaN or nonsense reaches the systems."""
+    _check(math.isfinite(s.duration) and s.duration > 0, "duration must be a positive number")
+    _check(s.plant_config.time_step > 0, "plant_config.time_step must be > 0 (a discrete "
+           "plant is needed for the PD-controlled actuators)")
+    _check(s.camera.fps > 0, "camera.fps must be > 0")
+    try:
+        s.camera.MakeCameras()  # validates the intrinsics and ranges
+    except Exception as e:
+        raise ScenarioError(f"camera: {_one_line(e)}") from None
+    _check(s.camera.renderer_class in ("", "RenderEngineVtk"),
+           "camera.renderer_class: only Drake's VTK renderer is supported (headless)")
+    _check(s.tool.model in TOOL_MODELS, f"tool.model must be one of {', '.join(TOOL_MODELS)}")
+    _finite([s.head.pan, s.head.tilt, s.tool.slide, s.tool.pivot, s.tool.gripper_position],
+            "head/tool values")
+    m = s.motion
+    _check(len(m.joint_ranges) == len(ARM_JOINTS)
+           and all(len(r) == 2 and r[0] <= r[1] for r in m.joint_ranges),
+           f"motion.joint_ranges needs {len(ARM_JOINTS)} [lower, upper] pairs with lower <= upper")
+    _finite([v for r in m.joint_ranges for v in r], "motion.joint_ranges")
+    _check(len(m.initial_posture) == len(ARM_JOINTS),
+           f"motion.initial_posture needs {len(ARM_JOINTS)} angles")
+    _finite(m.initial_posture, "motion.initial_posture")
+    _check(m.max_speed > 0 and m.min_duration > 0 and m.dwell >= 0 and m.period > 0,
+           "motion: max_speed, min_duration and period must be > 0, dwell >= 0")
+    w = s.wrench_sensor
+    _check(w.rate > 0 and w.force_noise >= 0 and w.torque_noise >= 0,
+           "wrench_sensor: rate must be > 0 and noise >= 0")
+    _check(len(w.bias) == 6, "wrench_sensor.bias needs 6 numbers [tau_x..tau_z, f_x..f_z]")
+    _finite(w.bias, "wrench_sensor.bias")
+    d = s.depth_noise
+    _check(d.a >= 0 and d.b >= 0, "depth_noise: a and b must be >= 0")
+    p = s.distractor
+    _check(len(p.waypoints) >= 2 and all(len(w) == 2 for w in p.waypoints),
+           "distractor.waypoints needs at least 2 [x, y] points")
+    _finite([v for w in p.waypoints for v in w], "distractor.waypoints")
+    _check(p.speed > 0, "distractor.speed must be > 0")
+    for i, e in enumerate(s.disturbances):
+        name = f"disturbances[{i}] ({type(e).__name__})"
+        _check(math.isfinite(e.time) and e.time >= 0, f"{name}: time must be >= 0")
+        _check(math.isfinite(e.duration) and e.duration > 0, f"{name}: duration must be > 0")
+        if isinstance(e, Touch):
+            _check(len(e.p_TQ) == 3 and len(e.f_T) == 3, f"{name}: p_TQ and f_T need 3 numbers")
+            _finite(list(e.p_TQ) + list(e.f_T), name)
+            _check(s.tool.model != "none", f"{name}: there is no tool to touch")
+        elif isinstance(e, ToolSlip):
+            _finite([e.slide, e.pivot], name)
+            _check(s.tool.model != "none", f"{name}: there is no tool to slip")
+        else:
+            _finite([e.pan, e.tilt], name)

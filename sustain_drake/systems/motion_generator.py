@@ -1,0 +1,153 @@
+"""Babbling: smooth random joint-space motions within joint ranges, with pause and confirm."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+# Layout of the discrete state vector (n = number of joints); see MotionGenerator.
+_T0, _DURATION, _SEGMENT, _KIND, _PAUSE_ID, _CONFIRM_ID = range(6)
+_HEADER = 6
+_MOVE, _HOLD = 0.0, 1.0
+
+
+def quintic(q0: np.ndarray, q1: np.ndarray, duration: float, s: float):
+    """Minimum-jerk interpolation from ``q0`` to ``q1``: position and velocity at time ``s``
+    into the move (zero velocity and acceleration at both ends, so moves chain smoothly)."""
+    if duration <= 0:
+        return q1.copy(), np.zeros_like(q1)
+    x = min(max(s / duration, 0.0), 1.0)
+    blend = x**3 * (10 - 15 * x + 6 * x**2)
+    rate = 30 * x**2 * (1 - x) ** 2 / duration
+    return q0 + (q1 - q0) * blend, (q1 - q0) * rate
+
+
+# The peak speed of a quintic move is 15/8 of its mean speed.
+_PEAK_OVER_MEAN = 15.0 / 8.0
+
+
+class MotionGenerator(LeafSystem):
+    """Smooth random joint-space motions (babbling) for identification, as in the paper.
+
+    .. pydrake_system::
+
+        name: MotionGenerator
+        input_ports:
+        - pause (optional)
+        - confirm (optional)
+        output_ports:
+        - desired_state
+
+    ``desired_state`` is ``[q_d, v_d]`` (rad, rad/s) for the n joints, for PD tracking in the
+    plant. The motion is a chain of minimum-jerk moves between random goals drawn uniformly
+    within ``[lower, upper]``; each move lasts ``max(min_duration, 15/8 |dq|_max /
+    max_speed)`` so no joint exceeds ``max_speed``, and may be followed by a rest of ``dwell``
+    seconds (quasi-static samples for the inertia identification). The k-th goal is drawn
+    from a generator seeded with ``(seed, k)``, so runs are reproducible.
+
+    Requests are edge-triggered by an id, so holding a value does not repeat the request:
+
+    - ``pause`` = ``[request_id, duration]``: when ``request_id`` changes, hold the current
+      desired posture for ``duration`` s, then continue babbling.
+    - ``confirm`` = ``[request_id, q_1, ..., q_n]``: when ``request_id`` changes, go back to
+      the posture ``q`` (at the pace) and then move again from there (the paper's confirming
+      motion after a coincidence).
+
+    Ids start at 0, so the first request uses 1. Unconnected inputs are ignored. The state is
+    a discrete vector (segment start time and duration, segment index and kind, last request
+    ids, segment start and goal postures), updated every ``period`` s.
+    """
+
+    def __init__(self, lower, upper, initial_posture, seed: int = 0, max_speed: float = 0.5,
+                 min_duration: float = 1.0, dwell: float = 0.0, period: float = 0.01):
+        super().__init__()
+        self._lower = np.asarray(lower, dtype=float)
+        self._upper = np.asarray(upper, dtype=float)
+        q_init = np.asarray(initial_posture, dtype=float)
+        n = self._lower.size
+        if self._upper.shape != (n,) or q_init.shape != (n,) or n == 0:
+            raise ValueError("lower, upper and initial_posture need the same length n > 0")
+        if not (np.all(np.isfinite(self._lower)) and np.all(np.isfinite(self._upper))
+                and np.all(self._lower <= self._upper) and np.all(np.isfinite(q_init))):
+            raise ValueError("joint ranges must be finite with lower <= upper")
+        if not (max_speed > 0 and min_duration > 0 and dwell >= 0 and period > 0):
+            raise ValueError("max_speed, min_duration, period must be > 0 and dwell >= 0")
+        self._n = n
+        self._seed = int(seed)
+        self._max_speed = float(max_speed)
+        self._min_duration = float(min_duration)
+        self._dwell = float(dwell)
+        q_init = np.clip(q_init, self._lower, self._upper)
+
+        # Start with a first move from the initial posture (segment 0 -> goal 0).
+        x0 = np.zeros(_HEADER + 2 * n)
+        goal = self._goal(0)
+        x0[_DURATION] = self._move_duration(q_init, goal)
+        x0[_SEGMENT] = 1
+        x0[_KIND] = _MOVE
+        # Request ids start at 0: the first request must use another id (1, 2, ...).
+        x0[_PAUSE_ID] = x0[_CONFIRM_ID] = 0.0
+        x0[_HEADER:_HEADER + n] = q_init
+        x0[_HEADER + n:] = goal
+        self._state = self.DeclareDiscreteState(x0)
+        self._pause = self.DeclareVectorInputPort("pause", 2)
+        self._confirm = self.DeclareVectorInputPort("confirm", 1 + n)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclareVectorOutputPort("desired_state", BasicVector(2 * n), self._calc_desired,
+                                     {self.time_ticket(), self.xd_ticket()})
+
+    def num_joints(self) -> int:
+        return self._n
+
+    def _goal(self, k: int) -> np.ndarray:
+        rng = np.random.default_rng([self._seed, k])
+        return rng.uniform(self._lower, self._upper)
+
+    def _move_duration(self, q0: np.ndarray, q1: np.ndarray) -> float:
+        return max(self._min_duration,
+                   _PEAK_OVER_MEAN * float(np.max(np.abs(q1 - q0))) / self._max_speed)
+
+    def _desired(self, x: np.ndarray, t: float):
+        n = self._n
+        return quintic(x[_HEADER:_HEADER + n], x[_HEADER + n:], x[_DURATION], t - x[_T0])
+
+    def _calc_desired(self, context, output) -> None:
+        x = context.get_discrete_state(self._state).get_value()
+        q, v = self._desired(x, context.get_time())
+        output.SetFromVector(np.concatenate([q, v]))
+
+    def _start(self, x: np.ndarray, t: float, q0, q1, duration: float, kind: float) -> None:
+        n = self._n
+        x[_T0], x[_DURATION], x[_KIND] = t, duration, kind
+        x[_HEADER:_HEADER + n] = q0
+        x[_HEADER + n:] = q1
+
+    def _update(self, context, discrete_state) -> None:
+        x = context.get_discrete_state(self._state).get_value().copy()
+        t = context.get_time()
+        q_now, _ = self._desired(x, t)
+        if self._confirm.HasValue(context):
+            request = self._confirm.Eval(context)
+            if np.all(np.isfinite(request)) and request[0] != x[_CONFIRM_ID]:
+                x[_CONFIRM_ID] = request[0]
+                target = np.clip(request[1:], self._lower, self._upper)
+                self._start(x, t, q_now, target, self._move_duration(q_now, target), _MOVE)
+                discrete_state.set_value(self._state, x)
+                return
+        if self._pause.HasValue(context):
+            request = self._pause.Eval(context)
+            if np.all(np.isfinite(request)) and request[0] != x[_PAUSE_ID]:
+                x[_PAUSE_ID] = request[0]
+                self._start(x, t, q_now, q_now, max(float(request[1]), 0.0), _HOLD)
+                discrete_state.set_value(self._state, x)
+                return
+        if t < x[_T0] + x[_DURATION]:
+            return
+        if x[_KIND] == _MOVE and self._dwell > 0:
+            self._start(x, t, q_now, q_now, self._dwell, _HOLD)
+        else:
+            k = int(x[_SEGMENT])
+            goal = self._goal(k)
+            x[_SEGMENT] = k + 1
+            self._start(x, t, q_now, goal, self._move_duration(q_now, goal), _MOVE)
+        discrete_state.set_value(self._state, x)

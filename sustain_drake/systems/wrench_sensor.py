@@ -1,0 +1,81 @@
+"""The wrist force/torque sensor: a weld's reaction force read as a noisy, biased sensor."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.tree import JointIndex
+from pydrake.systems.framework import LeafSystem
+
+
+class WristWrenchSensor(LeafSystem):
+    """Reads the reaction force of the sensor weld and outputs it as the sensor's reading.
+
+    .. pydrake_system::
+
+        name: WristWrenchSensor
+        input_ports:
+        - reaction_forces
+        output_ports:
+        - wrench
+
+    ``reaction_forces`` is ``MultibodyPlant.get_reaction_forces_output_port()`` (one
+    ``SpatialForce`` per joint, indexed by ``JointIndex``). ``wrench`` is the 6-vector
+    ``[tau_x, tau_y, tau_z, f_x, f_y, f_z]`` (N m, N; Drake's SpatialForce order, torque
+    first).
+
+    Sign convention (the identification math relies on it): the sensor frame K is the weld's
+    frame Jc on the child (gripper) side, and the reading is the spatial force APPLIED BY THE
+    PARENT (wrist) ON THE CHILD SIDE (gripper + held tool), about K's origin, expressed in K.
+    That is the plant's ``F_CJc_Jc`` for the weld. At rest, with an outboard mass m whose
+    centre of mass is at ``p_KCm`` and gravity ``g_W``: ``R_WK f_K = -m g_W`` (points up) and
+    ``tau_K = p_KCm x f_K``.
+
+    The reading is sampled at ``period`` (a zero-order hold kept in discrete state, so
+    contexts can be cloned) with Gaussian noise of standard deviations ``force_noise`` (N)
+    and ``torque_noise`` (N m) per axis, plus a constant ``bias``. The noise of the k-th
+    sample is drawn from a generator seeded with ``(seed, k)``: a simulation is reproducible
+    and independent of how it is advanced.
+    """
+
+    def __init__(self, joint_index: JointIndex | int, period: float,
+                 force_noise: float = 0.0, torque_noise: float = 0.0,
+                 bias=(0.0,) * 6, seed: int = 0):
+        super().__init__()
+        if not period > 0:
+            raise ValueError(f"period must be > 0, got {period}")
+        if force_noise < 0 or torque_noise < 0:
+            raise ValueError("noise standard deviations must be >= 0")
+        bias = np.asarray(bias, dtype=float)
+        if bias.shape != (6,) or not np.all(np.isfinite(bias)):
+            raise ValueError("bias must be 6 finite numbers [tau_x, tau_y, tau_z, f_x, f_y, f_z]")
+        self._joint = int(joint_index)
+        self._period = float(period)
+        self._sigma = np.array([torque_noise] * 3 + [force_noise] * 3, dtype=float)
+        self._bias = bias
+        self._seed = int(seed)
+        self.DeclareAbstractInputPort("reaction_forces", AbstractValue.Make([SpatialForce()]))
+        state = self.DeclareDiscreteState(6)
+        self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._sample)
+        # A first reading at t = 0, so the output is never an unmeasured zero.
+        self.DeclareInitializationDiscreteUpdateEvent(self._sample)
+        self.DeclareStateOutputPort("wrench", state)
+
+    def _sample(self, context, discrete_state) -> None:
+        forces = self.get_input_port(0).Eval(context)
+        if self._joint >= len(forces):
+            raise RuntimeError(f"reaction_forces has no entry for joint index {self._joint}")
+        reading = wrench_vector(forces[self._joint]) + self._bias
+        if np.any(self._sigma > 0):
+            k = int(round(context.get_time() / self._period))
+            rng = np.random.default_rng([self._seed, k])
+            reading = reading + self._sigma * rng.standard_normal(6)
+        discrete_state.set_value(0, reading)
+
+
+def wrench_vector(F) -> np.ndarray:
+    """A ``SpatialForce`` as ``[tau, f]``, the order of the ``wrench`` port."""
+    return np.concatenate([F.rotational(), F.translational()])
+
+
