@@ -1,0 +1,108 @@
+"""The babbling motion generator: smooth, within ranges, paced; pause and confirm requests."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource
+
+from sustain_drake.systems.motion_generator import MotionGenerator, quintic
+
+LOWER = np.array([-0.5, 0.0, 0.5])
+UPPER = np.array([0.5, 0.8, 1.5])
+START = np.array([0.0, 0.4, 1.0])
+
+
+def run(generator: MotionGenerator, duration: float, dt: float = 0.01, pause=None, confirm=None):
+    builder = DiagramBuilder()
+    builder.AddSystem(generator)
+    if pause is not None:
+        source = builder.AddSystem(ConstantVectorSource(pause))
+        builder.Connect(source.get_output_port(), generator.GetInputPort("pause"))
+    if confirm is not None:
+        source = builder.AddSystem(ConstantVectorSource(confirm))
+        builder.Connect(source.get_output_port(), generator.GetInputPort("confirm"))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = generator.GetMyContextFromRoot(simulator.get_context())
+    times, states = [], []
+    for t in np.arange(0.0, duration, dt):
+        simulator.AdvanceTo(t)
+        times.append(t)
+        states.append(generator.get_output_port().Eval(context).copy())
+    return np.array(times), np.array(states)
+
+
+def test_quintic_starts_and_ends_at_rest():
+    q0, q1 = np.array([0.0, 1.0]), np.array([1.0, -1.0])
+    for s, q_expected in ((0.0, q0), (2.0, q1), (3.0, q1)):
+        q, v = quintic(q0, q1, 2.0, s)
+        np.testing.assert_allclose(q, q_expected)
+        np.testing.assert_allclose(v, 0.0, atol=1e-12)
+    _, v_mid = quintic(q0, q1, 2.0, 1.0)
+    np.testing.assert_allclose(v_mid, 15 / 8 * (q1 - q0) / 2.0)
+
+
+def test_babbling_is_smooth_within_ranges_and_paced():
+    gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5, min_duration=0.5)
+    times, x = run(gen, 20.0)
+    q, v = x[:, :3], x[:, 3:]
+    np.testing.assert_allclose(q[0], START)
+    assert np.all(q >= LOWER - 1e-9) and np.all(q <= UPPER + 1e-9)
+    assert np.max(np.abs(v)) <= 0.5 + 1e-9
+    # Velocity is continuous (no jumps between moves): the finite difference matches v.
+    dq = np.diff(q, axis=0) / 0.01
+    np.testing.assert_allclose(dq, (v[1:] + v[:-1]) / 2, atol=0.02)
+    # It explores: each joint covers most of its range in 20 s.
+    assert np.all(q.max(axis=0) - q.min(axis=0) > 0.5 * (UPPER - LOWER))
+
+
+def test_same_seed_same_motion_other_seed_other_motion():
+    _, a = run(MotionGenerator(LOWER, UPPER, START, seed=3), 5.0)
+    _, b = run(MotionGenerator(LOWER, UPPER, START, seed=3), 5.0)
+    _, c = run(MotionGenerator(LOWER, UPPER, START, seed=4), 5.0)
+    np.testing.assert_array_equal(a, b)
+    assert np.max(np.abs(a - c)) > 0.05
+
+
+def test_dwell_rests_after_each_move():
+    gen = MotionGenerator(LOWER, UPPER, START, seed=2, min_duration=1.0, dwell=0.5)
+    _, x = run(gen, 10.0)
+    speed = np.max(np.abs(x[:, 3:]), axis=1)
+    still = speed < 1e-9
+    assert 0.15 < still.mean() < 0.6
+
+
+def test_pause_holds_the_posture_for_its_duration():
+    gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5)
+    times, x = run(gen, 3.0, pause=np.array([1.0, 2.0]))
+    q = x[:, :3]
+    # The request (id 1) arrives at the first update; the arm holds for 2 s, then moves on.
+    held = (times > 0.05) & (times < 1.95)
+    assert np.max(np.abs(q[held] - q[held][0])) < 1e-12
+    assert np.max(np.abs(x[held, 3:])) == 0.0
+    assert np.max(np.abs(q[times > 2.5] - q[held][0])) > 1e-3
+
+
+def test_confirm_goes_back_to_the_posture_then_moves_again():
+    target = np.array([0.4, 0.7, 0.6])
+    gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5, min_duration=0.5)
+    times, x = run(gen, 6.0, confirm=np.concatenate([[1.0], target]))
+    q = x[:, :3]
+    reached = np.linalg.norm(q - target, axis=1) < 1e-6
+    assert reached.any()
+    first = np.argmax(reached)
+    assert times[first] < 3.0
+    assert np.linalg.norm(q[-1] - target) > 0.05  # and it moved on (only once: edge-trigger)
+
+
+@pytest.mark.parametrize("args", [
+    (LOWER, UPPER[:2], START),
+    (UPPER, LOWER, START),
+    (LOWER, UPPER, [np.nan, 0, 0]),
+])
+def test_rejects_bad_ranges(args):
+    with pytest.raises(ValueError):
+        MotionGenerator(*args)
