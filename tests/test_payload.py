@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import IdentificationError, PayloadIdentifier, identify_payload
@@ -90,3 +92,32 @@ def test_input_errors():
         identify_payload(wrench, R_bad)
     with pytest.raises(ValueError, match="gravity_W"):
         PayloadIdentifier(gravity_W=[0.0, 0.0, 0.0])
+
+
+finite = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    samples=st.lists(
+        st.tuples(
+            st.lists(st.one_of(finite, st.floats()), min_size=6, max_size=6),
+            st.lists(finite, min_size=4, max_size=4),
+        ),
+        max_size=20,
+    )
+)
+def test_random_streams_never_give_nan(samples):
+    ident = PayloadIdentifier()
+    for w, q in samples:
+        q = np.array(q)
+        R = Rotation.from_quat(q).as_matrix() if np.linalg.norm(q) > 1e-6 else np.eye(3)
+        try:
+            ident.add(np.array(w), R)
+        except IdentificationError:
+            assert not np.all(np.isfinite(w)) or max(map(abs, w)) >= 1e100
+        solution = ident.solve()
+        assert np.all(np.isfinite(solution.eigenvalues))
+        assert np.isfinite(solution.mass) and np.all(np.isfinite(solution.p_KCm))
+        assert not np.isnan(solution.expected_mse)
+        assert isinstance(solution.verdict.converged, bool)

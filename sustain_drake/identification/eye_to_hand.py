@@ -175,13 +175,14 @@ _T_FLAT = np.concatenate(
 )
 
 
-def _jacobian(R: np.ndarray) -> np.ndarray:
+_SKEW_BASIS = [skew(e) for e in np.eye(3)]
+
+
+def _jacobian(R: np.ndarray, out: np.ndarray) -> np.ndarray:
     """``d x / d (omega, dp_WC, dp_HP)`` at ``R`` for the right perturbation ``R exp([omega x])``."""
-    J = np.zeros((N_UNKNOWNS, 9))
     for k in range(3):
-        J[0:9, k] = (R @ skew(np.eye(3)[k])).reshape(9, order="F")
-    J[9:15, 3:9] = np.eye(6)
-    return J
+        out[0:9, k] = (R @ _SKEW_BASIS[k]).ravel(order="F")
+    return out
 
 
 def refine(
@@ -190,34 +191,38 @@ def refine(
     R: np.ndarray,
     p_WC: np.ndarray,
     p_HP: np.ndarray,
-    max_iterations: int = 30,
-    tolerance: float = 1e-12,
+    max_iterations: int = 20,
+    tolerance: float = 1e-8,
 ) -> EyeToHandEstimate:
     """Gauss-Newton on SO(3) x R^3 x R^3 of ``J = x^T S x`` (the geometric least-squares cost
     ``sum ||R_WC p_CP + p_WC - R_WH p_HP - p_WH||^2``), from the statistic alone.
 
     ``x`` is linear in the translations and ``A_t x`` is linear in ``x``, so linearising ``x`` in
-    the rotation perturbation gives the Gauss-Newton step exactly. A step that would increase the
-    cost is halved (at most 20 times), so the cost never increases.
+    the rotation perturbation gives the Gauss-Newton step exactly. It stops when a step is below
+    ``tolerance`` (radians and metres). A step that would increase the cost is halved (at most 10
+    times), so the cost never increases.
     """
     x = pack_x(R, p_WC, p_HP)
     cost = float(x @ S @ x)
+    J = np.zeros((N_UNKNOWNS, 9))
+    J[9:15, 3:9] = np.eye(6)
     for _ in range(max_iterations):
-        J = _jacobian(R)
+        _jacobian(R, J)
         H = J.T @ S @ J
         g = J.T @ (S @ x)
         try:
             delta = -np.linalg.solve(H, g)
         except np.linalg.LinAlgError:
             delta = -np.linalg.lstsq(H, g, rcond=None)[0]
+        size = np.abs(delta).max()
         # A step of a million metres (or radians) only comes from a singular H: degenerate data.
-        if not np.abs(delta).max() < 1e6:
+        if not size < 1e6:
             break
         # Trust region on the rotation: a step beyond pi radians is meaningless on SO(3) (and only
         # happens on degenerate data, where H is singular).
         omega = math.sqrt(delta[0:3] @ delta[0:3])
         step = 1.0 if omega <= math.pi else math.pi / omega
-        for _ in range(20):
+        for _ in range(10):
             R_new = R @ so3_exp(step * delta[0:3])
             p_WC_new = p_WC + step * delta[3:6]
             p_HP_new = p_HP + step * delta[6:9]
@@ -227,11 +232,9 @@ def refine(
                 break
             step *= 0.5
         else:
-            break
-        R, p_WC, p_HP, x = R_new, p_WC_new, p_HP_new, x_new
-        improvement = cost - cost_new
-        cost = cost_new
-        if step * float(np.max(np.abs(delta))) < tolerance or improvement <= 1e-15 * max(cost, 1e-300):
+            break  # no decrease along the Gauss-Newton direction: at the optimum (to round-off)
+        R, p_WC, p_HP, x, cost = R_new, p_WC_new, p_HP_new, x_new, cost_new
+        if step * size < tolerance:
             break
     # Re-orthonormalise against drift from many small products (no effect on the cost).
     U, _, Vt = np.linalg.svd(R)
@@ -339,6 +342,9 @@ class EyeToHandIdentifier:
         )
         refined = None
         if refine_estimate:
-            refined = refine(S, core.weight, proj.R, x[9:12].copy(), x[12:15].copy())
+            with np.errstate(all="ignore"):  # absurd magnitudes: dropped below, never a NaN out
+                refined = refine(S, core.weight, proj.R, x[9:12].copy(), x[12:15].copy())
+            if not math.isfinite(refined.mean_squared_error + refined.x.sum()):
+                refined = None
         verdict = judge(self.criteria, n, eigen, math.sqrt(expected_mse), None, proj.ssd, " m")
         return EyeToHandSolution(eigen, a, proj.ssd, expected_mse, projected, refined, verdict, n)

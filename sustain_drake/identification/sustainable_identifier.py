@@ -284,9 +284,10 @@ class SustainableIdentifier:
         C = self._S if T is None else T.T @ self._S @ T
         # C is symmetric PSD, so a symmetric eigen-solver is the right tool, not a general SVD.
         # (LAPACK's partial solvers dsyevr/dsyevx for the few smallest are no faster at N = 16.)
-        w, V, info = lapack.dsyev(C)
+        # C is symmetric, so its transpose is the same matrix in Fortran order: no copy for LAPACK.
+        w, V, info = lapack.dsyev(C.T, overwrite_a=1 if T is not None else 0)
         # Eigenvalues come ascending; NaN anywhere (from a non-finite statistic) reaches the sum.
-        if info != 0 or not math.isfinite(w.sum() + V[:, 0].sum()):
+        if info != 0 or not math.isfinite(w.sum()):
             return None
         w = w[::-1] * (1.0 / n)  # of C = S/n, descending: lambda_1 >= ... >= lambda_N
         if w[-1] < 0.0:
