@@ -17,6 +17,8 @@ from sustain_drake.cli.common import EXIT_BAD_INPUT, CliError
 COMMAND_MODULES = (
     "sustain_drake.cli.calibrate",
     "sustain_drake.cli.demo",
+    "sustain_drake.cli.simulate",
+    "sustain_drake.cli.graph",
 )
 
 def build_parser() -> argparse.ArgumentParser:
