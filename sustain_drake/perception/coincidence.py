@@ -1,0 +1,390 @@
+r"""Body detection by motion coincidence (paper §3.3.2, Eq. (27)) and the rule that keeps a
+self-moving distractor out of the body.
+
+Pure numpy, no pydrake import; ``sustain_drake.systems.motion_coincidence_detector`` wraps it.
+
+Notation (paper): actuator ``i`` with value ``a_i`` (a joint encoder, rad), grid cell ``j`` with
+visual change ``ṡ_j`` (sum of optical-flow norms in the cell, px/s), likelihood ``ε_ij`` that cell
+``j`` is moved by actuator ``i``.
+
+Eq. (27), implemented by :func:`causal_and` and counted by :func:`step`::
+
+    Δε_ij = ρ_a(ȧ_i) ∩ ρ_s(ṡ_j)
+
+- ``ρ_a`` is 1 while the last onset of actuator ``i`` (its change "rising up from 0": moving
+  now after at least ``quiet_a`` s without motion) is at most ``τ_a`` old; ``ρ_s`` likewise for
+  the cell with ``τ_s`` (:func:`rho`).
+- ``∩`` is 1 when both are 1 and the actuator's remaining time ``τ_a - (t - t_a)`` is not longer
+  than the cell's ``τ_s - (t - t_s)``: the actuator's onset came first (visual motion right after
+  body motion, the causal order). Onsets seen in the same sample count as actuator first, since
+  the encoder difference and the image pair span the same interval.
+- ``ε_ij`` increments once per coincident pair of onsets (the pair is remembered).
+
+**The body rule (ours; the paper leaves it at Σ_i ε_ij > 0).** Counting coincidences lets a busy
+distractor through: a cell with visual onsets at 0.5/s falls in a 300 ms window after an actuator
+onset ~14 % of the time. So ``ε`` is the paper's likelihood map, and a cell is marked *body* only
+after a sequential likelihood-ratio test between "the cell moves because of the robot" (responds
+to an actuator onset with probability ``p_response``) and "the cell moves by itself" (falls in the
+window by chance with probability ``p0_j``):
+
+1. *Counter-evidence, visual onsets with no actuator onset before them.* While every actuator has
+   been still for ``τ_a`` (Eq. (26): no body motion ⇒ no body motion in view), a visual onset in
+   cell ``j`` cannot be the robot. These are counted (``unexplained_j``) with the still time
+   ``T_still,j`` during which the cell was quiet (both forgotten with time constant ``memory``);
+   the cell's spontaneous onset rate is
+   ``λ_j = (unexplained_j + prior_onsets) / (T_still,j + prior_time)`` and its chance-coincidence
+   probability ``p0_j = 1 - exp(-λ_j τ_s)``. A busy cell thus needs more evidence than a quiet one.
+   The Poisson log-likelihood ratio of these still-time onsets, body (rate ``body_onset_rate``)
+   against ``λ_j``, is added to ``L_j``: a cell that moves while the robot is still loses evidence.
+2. *Confirming motions (paper §3.3.2, §4.2).* When ``ε_ij`` increments for cells not yet body and
+   no confirmation is pending, the detector requests one: go back to the posture ``q*`` at the
+   actuator's onset, and move again. The coincidence that raised the request adds
+   ``ln(p_response / p0_j)`` to each candidate cell's evidence ``L_j``.
+3. *Trial.* The first actuator onset within ``posture_tolerance`` of ``q*`` after the request
+   starts a trial that lasts ``τ_a + τ_s``. A candidate cell that shows a coinciding visual onset
+   (Eq. (27) with an actuator onset of the trial) is a *hit*: ``L_j += ln(p_response / p0_j)``.
+   A candidate cell with no visual response although one of its candidate actuators moved again
+   is a *miss* (counter-evidence, *actuator onsets with no visual response*, only counted at the
+   same posture, where Eq. (26) says the body must respond): ``L_j += ln((1-p_response)/(1-p0_j))``.
+   A request with no trial within ``confirm_timeout`` expires without evidence.
+4. Cell ``j`` is **body** while ``L_j >= ln(1/alpha)``. ``L_j`` is floored at ``ln(beta)`` so a
+   cell that held a distractor can still become body later (the arm may move into it).
+
+With the defaults (``p_response`` = 0.9, ``alpha`` = 1e-3) a cell watched while still (p0 ≈ 0.03)
+becomes body after its first coincidence and one confirming hit; the issue's busy distractor
+(p0 ≈ 0.14 once its rate is measured) needs four hits more than its misses can take away.
+
+The state is a :class:`CoincidenceState` of plain numpy arrays with an exact flat-vector
+round trip (:meth:`CoincidenceState.to_vector`, :meth:`CoincidenceState.from_vector`), so a Drake
+system can keep it as discrete state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+NEVER = -1.0e9
+"""Time (s) stored for "no onset yet": far in the past, finite so the state never holds inf."""
+
+
+@dataclass(frozen=True)
+class CoincidenceParams:
+    """Parameters of Eq. (27) and of the body rule (see the module docstring)."""
+
+    tau_a: float = 0.3                 # τ_a, s: window of the actuator onset detector ρ_a
+    tau_s: float = 0.3                 # τ_s, s: window of the visual onset detector ρ_s
+    adot_threshold: float = 0.01       # rad/s: |ȧ_i| above this is actuator motion
+    sdot_threshold: float = 1.0        # px/s: ṡ_j above this is visual motion
+    quiet_a: float = 0.1               # s without motion before an actuator change "rises from 0"
+    quiet_s: float = 0.1               # s without motion before a visual change "rises from 0"
+    #                                    (a dropped frame, one sample of 0, is not a new onset)
+    p_response: float = 0.9            # P(body cell responds to its actuator's onset)
+    prior_onsets: float = 1.0          # prior spontaneous onsets ...
+    prior_time: float = 2.0            # ... in this prior still time: 0.5/s, the busy distractor
+    body_onset_rate: float = 0.02      # 1/s: spontaneous onsets of a body cell while still (noise)
+    memory: float = 30.0               # s: time constant forgetting unexplained onsets/still time
+    hold_min: float = 0.25             # s: shortest requested hold at q* before moving again
+    hold_spread: float = 0.35          # s: hold varies in [hold_min, hold_min + hold_spread]
+    alpha: float = 1e-3                # body when L_j >= ln(1/alpha)
+    beta: float = 1e-2                 # L_j floored at ln(beta)
+    posture_tolerance: float = 0.05    # rad, max-norm: a confirming trial starts near q*
+    confirm_timeout: float = 5.0       # s: an unanswered confirming request expires
+
+    def __post_init__(self):
+        positive = ("tau_a", "tau_s", "p_response", "prior_onsets", "prior_time", "alpha",
+                    "beta", "posture_tolerance", "confirm_timeout", "body_onset_rate", "memory",
+                    "hold_min")
+        for name in positive:
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and positive, got {value}")
+        for name in ("adot_threshold", "sdot_threshold", "quiet_a", "quiet_s", "hold_spread"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if not (self.p_response < 1 and self.alpha < 1 and self.beta < 1):
+            raise ValueError("p_response, alpha and beta must be below 1")
+
+    @property
+    def body_threshold(self) -> float:
+        return float(np.log(1.0 / self.alpha))
+
+    @property
+    def evidence_floor(self) -> float:
+        return float(np.log(self.beta))
+
+
+# (name, shape as a function of (n_a, n_c)). Order fixes the flat-vector layout.
+_FIELDS = (
+    ("t_prev", lambda na, nc: ()),            # time of the previous step; NEVER before the first
+    ("request_active", lambda na, nc: ()),    # 1 while a confirming motion is requested
+    ("request_count", lambda na, nc: ()),     # number of requests raised so far
+    ("request_time", lambda na, nc: ()),
+    ("trial_active", lambda na, nc: ()),
+    ("trial_t0", lambda na, nc: ()),
+    ("a_prev", lambda na, nc: (na,)),         # previous actuator values a_i
+    ("last_motion_a", lambda na, nc: (na,)),  # last time actuator i moved
+    ("t_onset_a", lambda na, nc: (na,)),      # last onset time of actuator i
+    ("q_request", lambda na, nc: (na,)),      # q*: the posture to return to
+    ("trial_moved", lambda na, nc: (na,)),    # actuators with an onset during the trial
+    ("q_onset", lambda na, nc: (na, na)),     # row i: posture at actuator i's last onset
+    ("last_motion_s", lambda na, nc: (nc,)),
+    ("t_onset_s", lambda na, nc: (nc,)),
+    ("unexplained", lambda na, nc: (nc,)),    # visual onsets while the robot was still
+    ("t_still", lambda na, nc: (nc,)),        # T_still,j: still time the cell could have onset, s
+    ("evidence", lambda na, nc: (nc,)),       # L_j
+    ("candidates", lambda na, nc: (nc,)),     # cells under test by the pending request
+    ("eps", lambda na, nc: (na, nc)),         # ε_ij, Eq. (27)
+    ("counted_ta", lambda na, nc: (na, nc)),  # onset pair last counted into ε_ij
+    ("counted_ts", lambda na, nc: (na, nc)),
+    ("hits", lambda na, nc: (na, nc)),        # confirming hits per pair
+    ("misses", lambda na, nc: (na, nc)),      # confirming misses per pair
+    ("cand_act", lambda na, nc: (na, nc)),    # pairs that raised the pending request
+    ("trial_hit", lambda na, nc: (na, nc)),   # pairs that coincided during the trial
+)
+
+
+class CoincidenceState:
+    """Per-actuator / per-cell state of the detector: plain float arrays, one per field.
+
+    ``n_a`` actuators, ``n_c`` cells. Booleans are stored as 0/1 and times in seconds, with
+    :data:`NEVER` for "not yet". ``copy()`` is deep; ``to_vector``/``from_vector`` round-trip.
+    """
+
+    __slots__ = ("n_a", "n_c") + tuple(name for name, _ in _FIELDS)
+
+    def __init__(self, n_a: int, n_c: int):
+        if n_a <= 0 or n_c <= 0:
+            raise ValueError(f"need at least one actuator and one cell, got {n_a}, {n_c}")
+        self.n_a, self.n_c = int(n_a), int(n_c)
+        for name, shape in _FIELDS:
+            setattr(self, name, np.zeros(shape(self.n_a, self.n_c)))
+        for name in ("t_prev", "last_motion_a", "t_onset_a", "last_motion_s", "t_onset_s",
+                     "counted_ta", "counted_ts", "request_time", "trial_t0"):
+            getattr(self, name)[...] = NEVER
+
+    @staticmethod
+    def size(n_a: int, n_c: int) -> int:
+        return int(sum(np.prod(shape(n_a, n_c), dtype=int) for _, shape in _FIELDS))
+
+    def to_vector(self) -> np.ndarray:
+        return np.concatenate([np.ravel(getattr(self, name)) for name, _ in _FIELDS])
+
+    @staticmethod
+    def from_vector(vector: np.ndarray, n_a: int, n_c: int) -> CoincidenceState:
+        v = np.asarray(vector, dtype=float).ravel()
+        if v.size != CoincidenceState.size(n_a, n_c):
+            raise ValueError(f"state vector has {v.size} entries, expected "
+                             f"{CoincidenceState.size(n_a, n_c)} for {n_a} actuators, {n_c} cells")
+        s = CoincidenceState(n_a, n_c)
+        k = 0
+        for name, shape in _FIELDS:
+            shp = shape(n_a, n_c)
+            n = int(np.prod(shp, dtype=int))
+            setattr(s, name, v[k:k + n].reshape(shp).copy())
+            k += n
+        return s
+
+    def copy(self) -> CoincidenceState:
+        return CoincidenceState.from_vector(self.to_vector(), self.n_a, self.n_c)
+
+    def __deepcopy__(self, memo):
+        return self.copy()
+
+    def spontaneous_rate(self, params: CoincidenceParams) -> np.ndarray:
+        """``λ_j``, 1/s: cell j's rate of visual onsets while the robot is still."""
+        return (self.unexplained + params.prior_onsets) / (self.t_still + params.prior_time)
+
+    def still_evidence(self, params: CoincidenceParams) -> np.ndarray:
+        """Poisson log-likelihood ratio of the still-time onsets: body (rate ``body_onset_rate``)
+        against the cell's own rate ``λ_j`` (≤ 0 once a cell moves while the robot is still)."""
+        rate = self.spontaneous_rate(params)
+        return (self.unexplained * np.log(params.body_onset_rate / rate)
+                - (params.body_onset_rate - rate) * self.t_still)
+
+    def total_evidence(self, params: CoincidenceParams) -> np.ndarray:
+        """``L_j``: confirming-motion evidence plus still-time evidence (n_c)."""
+        return self.evidence + self.still_evidence(params)
+
+    def body(self, params: CoincidenceParams) -> np.ndarray:
+        """Body-cell mask (bool, n_c): ``L_j >= ln(1/alpha)``."""
+        return self.total_evidence(params) >= params.body_threshold
+
+    def moves(self, params: CoincidenceParams) -> np.ndarray:
+        """Which actuator moves which cell (bool, n_a x n_c): body cell, more hits than misses."""
+        return self.body(params)[None, :] & (self.hits > self.misses)
+
+    def chance_probability(self, params: CoincidenceParams) -> np.ndarray:
+        """``p0_j``: probability that cell j's own onsets fall in a τ_s window by chance."""
+        return -np.expm1(-self.spontaneous_rate(params) * params.tau_s)
+
+    def hold_time(self, params: CoincidenceParams) -> float:
+        """Requested hold at q* (s), varied per request by a golden-ratio sequence so the
+        confirming trials never phase-lock with a periodic distractor (a walking person)."""
+        phase = (float(self.request_count) * 0.6180339887498949) % 1.0
+        return params.hold_min + phase * params.hold_spread
+
+
+def onset(moving: np.ndarray, last_motion: np.ndarray, t: float, quiet: float) -> np.ndarray:
+    """"Rises up from 0": moving now, and not moving at any sample in the last ``quiet`` s."""
+    return np.asarray(moving, bool) & (t - np.asarray(last_motion) > quiet)
+
+
+def rho(t: float, t_onset: np.ndarray, tau: float) -> np.ndarray:
+    """ρ of Eq. (27): 1 while the last onset is at most ``tau`` old."""
+    age = t - np.asarray(t_onset, dtype=float)
+    return (age >= 0.0) & (age <= tau)
+
+
+def causal_and(t: float, t_onset_a: np.ndarray, tau_a: float, t_onset_s: np.ndarray,
+               tau_s: float) -> np.ndarray:
+    """The ∩ of Eq. (27) for every pair (n_a x n_c bool): both ρ are 1 and the actuator's
+    remaining time is not longer than the cell's (the actuator's onset came first)."""
+    t_a = np.asarray(t_onset_a, dtype=float)
+    t_s = np.asarray(t_onset_s, dtype=float)
+    remaining_a = tau_a - (t - t_a)
+    remaining_s = tau_s - (t - t_s)
+    both = rho(t, t_a, tau_a)[:, None] & rho(t, t_s, tau_s)[None, :]
+    return both & (remaining_a[:, None] <= remaining_s[None, :])
+
+
+def _check_inputs(state: CoincidenceState, t: float, a: np.ndarray, sdot: np.ndarray):
+    if a.shape != (state.n_a,) or sdot.shape != (state.n_c,):
+        raise ValueError(f"expected {state.n_a} actuator values and {state.n_c} cell values, "
+                         f"got shapes {a.shape} and {sdot.shape}")
+    if not (np.isfinite(t) and np.isfinite(a).all() and np.isfinite(sdot).all()):
+        raise ValueError("actuator values, visual change and time must be finite")
+    if t <= state.t_prev:
+        raise ValueError(f"time must increase: {t} after {state.t_prev}")
+
+
+def step(state: CoincidenceState, t: float, a: np.ndarray, sdot: np.ndarray,
+         params: CoincidenceParams = CoincidenceParams()) -> CoincidenceState:
+    """One sample of the detector at time ``t`` (s): actuator values ``a`` (rad) and per-cell
+    visual change ``sdot`` (px/s). Returns the new state; ``state`` is not modified."""
+    a = np.asarray(a, dtype=float).ravel()
+    sdot = np.asarray(sdot, dtype=float).ravel()
+    _check_inputs(state, t, a, sdot)
+    s = state.copy()
+    first = state.t_prev <= NEVER
+    s.t_prev = np.float64(t)
+    if first:
+        # No previous sample: no ȧ yet. Record the posture only.
+        s.a_prev = a.copy()
+        return s
+
+    # Onset detectors ρ_a, ρ_s ("rises up from 0").
+    adot = (a - state.a_prev) / (t - state.t_prev)
+    moving_a = np.abs(adot) > params.adot_threshold
+    onset_a = onset(moving_a, state.last_motion_a, t, params.quiet_a)
+    moving_s = sdot > params.sdot_threshold
+    onset_s = onset(moving_s, state.last_motion_s, t, params.quiet_s)
+    s.last_motion_a[moving_a] = t
+    s.last_motion_s[moving_s] = t
+    s.t_onset_a[onset_a] = t
+    s.t_onset_s[onset_s] = t
+    s.q_onset[onset_a] = state.a_prev        # the posture the motion started from
+    s.a_prev = a.copy()
+
+    # Counter-evidence 1: visual onsets while the robot has been still for τ_a, with
+    # exponential forgetting so a cell a person left behind can become body later.
+    dt = t - state.t_prev
+    keep = np.exp(-dt / params.memory)
+    s.t_still *= keep
+    s.unexplained *= keep
+    if not moving_a.any() and t - state.last_motion_a.max() > params.tau_a:
+        # Exposure counts only while the cell was quiet (able to have an onset), so λ_j is the
+        # rate at which a quiet cell starts moving: the chance it starts inside a trial window.
+        s.t_still += dt * (t - state.last_motion_s > params.quiet_s)
+        s.unexplained += onset_s
+
+    # Eq. (27), once per coincident pair of onsets.
+    fired = causal_and(t, s.t_onset_a, params.tau_a, s.t_onset_s, params.tau_s)
+    already = (s.counted_ta == s.t_onset_a[:, None]) & (s.counted_ts == s.t_onset_s[None, :])
+    new = fired & ~already
+    s.eps += new
+    s.counted_ta = np.where(new, s.t_onset_a[:, None], s.counted_ta)
+    s.counted_ts = np.where(new, s.t_onset_s[None, :], s.counted_ts)
+
+    _confirm(s, t, onset_a, new, params)
+    return s
+
+
+def _add_evidence(s: CoincidenceState, cells: np.ndarray, hit: bool, params: CoincidenceParams):
+    p0 = s.chance_probability(params)
+    if hit:
+        term = np.log(params.p_response / p0)
+    else:
+        term = np.log((1.0 - params.p_response) / (1.0 - p0))
+    s.evidence = np.where(cells, np.maximum(s.evidence + term, params.evidence_floor), s.evidence)
+
+
+def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray,
+             params: CoincidenceParams):
+    """Confirming motions: raise a request, recognise its trial, score hits and misses."""
+    if s.request_active and not s.trial_active:
+        # Rows of q_onset for this sample's onsets all hold the posture the motion started from.
+        started_near = onset_a.any() and np.max(
+            np.abs(s.q_onset[np.argmax(onset_a)] - s.q_request)) <= params.posture_tolerance
+        if started_near:
+            s.trial_active = np.float64(1)
+            s.trial_t0 = np.float64(t)
+            s.trial_moved[:] = 0
+            s.trial_hit[:] = 0
+        elif t - s.request_time > params.confirm_timeout:
+            _clear_request(s)
+            return
+
+    if s.trial_active:
+        cand = s.candidates > 0
+        s.trial_moved = np.maximum(s.trial_moved, onset_a)
+        trial_new = new & (s.t_onset_a >= s.trial_t0)[:, None]
+        # A hit is scored at once (detection latency); a miss only when the window has closed.
+        first_hit = cand & trial_new.any(axis=0) & ~(s.trial_hit.max(axis=0) > 0)
+        _add_evidence(s, first_hit, True, params)
+        s.hits += trial_new & ~(s.trial_hit > 0) & cand[None, :]
+        s.trial_hit = np.maximum(s.trial_hit, trial_new)
+        hit = s.trial_hit.max(axis=0) > 0
+        # The trial ends when every candidate has responded, or when its window has closed.
+        if (hit | ~cand).all() or t - s.trial_t0 > params.tau_a + params.tau_s:
+            tested_pairs = (s.cand_act > 0) & (s.trial_moved[:, None] > 0)
+            miss = cand & ~hit & tested_pairs.any(axis=0)
+            _add_evidence(s, miss, False, params)
+            s.misses += tested_pairs & miss[None, :]
+            # Cells that responded here and are not yet body are tested again at once, at the
+            # same posture (a fast sequence of unselected trials).
+            follow = (s.trial_hit > 0) & ~s.body(params)[None, :]
+            q = s.q_request.copy()
+            _clear_request(s)
+            if follow.any():
+                _raise_request(s, t, follow, q)
+        return
+
+    if not s.request_active:
+        trigger = new & ~s.body(params)[None, :]
+        if trigger.any():
+            acts = np.flatnonzero(trigger.any(axis=1))
+            latest = acts[np.argmax(s.t_onset_a[acts])]
+            _raise_request(s, t, trigger, s.q_onset[latest])
+
+
+def _raise_request(s: CoincidenceState, t: float, pairs: np.ndarray, q: np.ndarray):
+    # The coincidence that raises a request is not evidence: it was selected because it
+    # coincided, and a busy distractor coincides often. Only the trials that follow count.
+    s.request_active = np.float64(1)
+    s.request_count += 1
+    s.request_time = np.float64(t)
+    s.q_request = np.array(q, dtype=float)
+    s.cand_act = pairs.astype(float)
+    s.candidates = pairs.any(axis=0).astype(float)
+
+
+def _clear_request(s: CoincidenceState):
+    s.request_active = np.float64(0)
+    s.trial_active = np.float64(0)
+    s.candidates[:] = 0
+    s.cand_act[:] = 0
+    s.trial_hit[:] = 0
+    s.trial_moved[:] = 0

@@ -1,0 +1,166 @@
+"""Evaluation of body detection against the renderer's labels (issue 4, item 4). Pure numpy + cv2.
+
+- :func:`cell_coverage`: fraction of each grid cell covered by given labels in a label image.
+- :class:`CellTruth`: per-cell truth accumulated over an episode: a cell is *body* where the
+  robot's pixels (arm and held tool) covered at least ``body_cover`` (10 %) of it in some frame,
+  *background* where they never covered any pixel, and *ignored* in between. *Distractor* cells
+  are background cells where the distractor's pixels appeared.
+- :func:`mask_metrics`: precision, recall and IoU of a predicted body mask on that truth.
+- :func:`detection_latencies`: per cell, the time from its first visible robot motion to its
+  first detection.
+- :func:`draw_likelihood_map` / :func:`save_likelihood_png`: the likelihood map over the camera
+  image, like the paper's Figs. 3-5 (red: body cells, shade ~ Σ_i ε_ij; blue: cells with ṡ_j > 0).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .optical_flow import CellGrid
+
+BODY, BACKGROUND, IGNORED = 1, 0, -1
+
+
+def cell_coverage(label_image: np.ndarray, labels: Iterable[int], grid: CellGrid) -> np.ndarray:
+    """Fraction (0..1) of the pixels of each cell whose label is in ``labels`` (n_c)."""
+    lab = np.asarray(label_image)
+    if lab.ndim == 3 and lab.shape[2] == 1:
+        lab = lab[:, :, 0]
+    if lab.shape != (grid.height, grid.width):
+        raise ValueError(f"label image is {lab.shape[::-1]} but the grid is over "
+                         f"{grid.width}x{grid.height}")
+    hit = np.isin(lab, np.asarray(list(labels), dtype=lab.dtype)).astype(float)
+    rows = np.arange(grid.height) * grid.rows // grid.height
+    cols = np.arange(grid.width) * grid.cols // grid.width
+    cell = rows[:, None] * grid.cols + cols[None, :]
+    covered = np.bincount(cell.ravel(), weights=hit.ravel(), minlength=grid.num_cells)
+    pixels = np.bincount(cell.ravel(), minlength=grid.num_cells)
+    return covered / pixels
+
+
+@dataclass
+class CellTruth:
+    """Per-cell ground truth accumulated frame by frame from label images."""
+
+    grid: CellGrid
+    body_labels: tuple[int, ...]
+    distractor_labels: tuple[int, ...] = ()
+    body_cover: float = 0.10
+
+    def __post_init__(self):
+        n = self.grid.num_cells
+        self.max_body_cover = np.zeros(n)
+        self.distractor_seen = np.zeros(n, bool)
+
+    def update(self, label_image: np.ndarray) -> np.ndarray:
+        """Add one frame; returns this frame's body coverage per cell."""
+        cover = cell_coverage(label_image, self.body_labels, self.grid)
+        self.max_body_cover = np.maximum(self.max_body_cover, cover)
+        if self.distractor_labels:
+            self.distractor_seen |= cell_coverage(
+                label_image, self.distractor_labels, self.grid) > 0
+        return cover
+
+    def truth(self) -> np.ndarray:
+        """BODY (1), BACKGROUND (0) or IGNORED (-1) per cell, over the episode so far."""
+        t = np.full(self.grid.num_cells, IGNORED)
+        t[self.max_body_cover >= self.body_cover] = BODY
+        t[self.max_body_cover == 0] = BACKGROUND
+        return t
+
+    def distractor_cells(self) -> np.ndarray:
+        """Background cells where the distractor appeared (bool, n_c)."""
+        return self.distractor_seen & (self.truth() == BACKGROUND)
+
+
+def mask_metrics(predicted: np.ndarray, truth: np.ndarray) -> dict:
+    """Precision, recall and IoU of a boolean body mask on BODY/BACKGROUND/IGNORED truth.
+
+    Ignored cells count neither way. With no predicted (or no true) body cell, precision (recall)
+    is 1.0 by convention when there is nothing to get wrong, else 0.0.
+    """
+    pred = np.asarray(predicted, bool)
+    truth = np.asarray(truth)
+    if pred.shape != truth.shape:
+        raise ValueError(f"mask {pred.shape} and truth {truth.shape} differ in shape")
+    scored = truth != IGNORED
+    tp = int(np.sum(pred & (truth == BODY)))
+    fp = int(np.sum(pred & (truth == BACKGROUND)))
+    fn = int(np.sum(~pred & (truth == BODY)))
+    return {
+        "true_positive": tp, "false_positive": fp, "false_negative": fn,
+        "precision": tp / (tp + fp) if tp + fp else 1.0,
+        "recall": tp / (tp + fn) if tp + fn else 1.0,
+        "iou": tp / (tp + fp + fn) if tp + fp + fn else 1.0,
+        "scored_cells": int(scored.sum()),
+    }
+
+
+def distractor_cells_marked(ever_marked: np.ndarray, distractor_cells: np.ndarray) -> int:
+    """Number of distractor cells that were ever marked body."""
+    return int(np.sum(np.asarray(ever_marked, bool) & np.asarray(distractor_cells, bool)))
+
+
+def detection_latencies(times: np.ndarray, visible_motion: np.ndarray,
+                        marked: np.ndarray) -> np.ndarray:
+    """Per cell: first time marked body minus first time the robot's motion was visible in it.
+
+    ``times`` (T), ``visible_motion`` and ``marked`` (T x n_c bool). Returns one latency (s) per
+    cell that had visible motion and was detected after it; cells never detected are left out
+    (they show in the recall). A cell marked before its first visible motion gives 0.
+    """
+    t = np.asarray(times, dtype=float)
+    vis = np.asarray(visible_motion, bool)
+    mk = np.asarray(marked, bool)
+    if vis.shape != mk.shape or vis.shape[0] != t.shape[0]:
+        raise ValueError(f"times {t.shape}, visible {vis.shape}, marked {mk.shape} disagree")
+    out = []
+    for j in range(vis.shape[1]):
+        if vis[:, j].any() and mk[:, j].any():
+            first_vis = t[np.argmax(vis[:, j])]
+            first_mark = t[np.argmax(mk[:, j])]
+            out.append(max(0.0, first_mark - first_vis))
+    return np.asarray(out)
+
+
+def draw_likelihood_map(image: np.ndarray, grid: CellGrid, eps: np.ndarray,
+                        body: np.ndarray, sdot: np.ndarray | None = None) -> np.ndarray:
+    """RGB uint8 picture: the camera image with body cells shaded red in proportion to
+    Σ_i ε_ij (outlined), and cells with visual motion outlined blue (paper Figs. 3-5)."""
+    img = np.asarray(image)
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[:, :, :3]
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    if img.shape[:2] != (grid.height, grid.width) or img.dtype != np.uint8:
+        raise ValueError(f"image must be uint8 {grid.width}x{grid.height}, got {img.dtype} "
+                         f"{img.shape}")
+    out = img.astype(float)
+    likelihood = np.asarray(eps, dtype=float).reshape(-1, grid.num_cells).sum(axis=0)
+    body = np.asarray(body, bool).ravel()
+    top = likelihood[body].max() if body.any() else 1.0
+    red = np.array([255.0, 0.0, 0.0])
+    for j in np.flatnonzero(body):
+        u0, v0, u1, v1 = grid.cell_bounds(j)
+        a = 0.3 + 0.4 * likelihood[j] / max(top, 1e-9)
+        out[v0:v1, u0:u1] = (1 - a) * out[v0:v1, u0:u1] + a * red
+    out = np.clip(out, 0, 255).astype(np.uint8)
+    moving = np.zeros(grid.num_cells, bool) if sdot is None else np.asarray(sdot).ravel() > 0
+    for j in range(grid.num_cells):
+        if body[j] or moving[j]:
+            u0, v0, u1, v1 = grid.cell_bounds(j)
+            color = (255, 0, 0) if body[j] else (0, 0, 255)
+            cv2.rectangle(out, (u0, v0), (u1 - 1, v1 - 1), color, 1)
+    return out
+
+
+def save_likelihood_png(path, image: np.ndarray, grid: CellGrid, eps: np.ndarray,
+                        body: np.ndarray, sdot: np.ndarray | None = None) -> None:
+    """Write :func:`draw_likelihood_map` to ``path`` as PNG."""
+    rgb = draw_likelihood_map(image, grid, eps, body, sdot)
+    if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
+        raise ValueError(f"could not write {path}")

@@ -1,0 +1,337 @@
+"""Optical-flow tracker core (paper §4.2): Shi–Tomasi corners tracked by pyramidal Lucas–Kanade.
+
+Pure numpy + OpenCV, no pydrake import; ``sustain_drake.systems.optical_flow_tracker`` wraps it.
+
+Per frame, :func:`track_frame` turns the previous :class:`TrackerState` and a new image into
+
+- the per-cell visual change ``ṡ_j`` of Eq. (27): the sum of the flow norms of the features in
+  grid cell ``j``, in pixels per second (the paper sums ``cvCalcOpticalFlowPyrLK`` flow norms);
+- the tracked features (:class:`TrackedFeatures`): stable id, pixel, flow, and the 3-D point
+  ``p_CP`` in the camera frame C (Drake's convention: +X right, +Y down, +Z forward) from the
+  depth image.
+
+Frames that carry no information (empty 0x0, black, or not newer than the last one) are skipped:
+the state, and so every track's history, is returned unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PinholeIntrinsics:
+    """Pinhole intrinsics in pixels (the subset of Drake's ``CameraInfo`` the tracker needs)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def __post_init__(self):
+        if self.width <= 0 or self.height <= 0:
+            raise ValueError(f"image size must be positive, got {self.width}x{self.height}")
+        if not (np.isfinite([self.fx, self.fy, self.cx, self.cy]).all()
+                and self.fx > 0 and self.fy > 0):
+            raise ValueError(f"focal lengths must be finite and positive, got {self.fx}, {self.fy}")
+
+
+@dataclass(frozen=True)
+class CellGrid:
+    """A ``rows`` x ``cols`` grid of equal cells over a ``width`` x ``height`` image.
+
+    Cell ``j = row * cols + col`` (row-major), the index used for ``ṡ_j`` and ``ε_ij``.
+    """
+
+    width: int
+    height: int
+    rows: int = 12
+    cols: int = 16
+
+    def __post_init__(self):
+        if min(self.width, self.height, self.rows, self.cols) <= 0:
+            raise ValueError(f"grid and image sizes must be positive, got {self}")
+        if self.rows > self.height or self.cols > self.width:
+            raise ValueError(f"grid {self.rows}x{self.cols} finer than image "
+                             f"{self.width}x{self.height}")
+
+    @property
+    def num_cells(self) -> int:
+        return self.rows * self.cols
+
+    def cell_of(self, p_px: np.ndarray) -> np.ndarray:
+        """Cell index of each pixel position ``p_px`` (K x 2, columns u, v); -1 if outside."""
+        p = np.asarray(p_px, dtype=float).reshape(-1, 2)
+        col = np.floor(p[:, 0] * self.cols / self.width).astype(np.int64)
+        row = np.floor(p[:, 1] * self.rows / self.height).astype(np.int64)
+        inside = (col >= 0) & (col < self.cols) & (row >= 0) & (row < self.rows)
+        return np.where(inside, row * self.cols + col, -1)
+
+    def cell_bounds(self, j: int) -> tuple[int, int, int, int]:
+        """Pixel bounds ``(u0, v0, u1, v1)`` of cell ``j`` (u1, v1 exclusive)."""
+        row, col = divmod(int(j), self.cols)
+        u0 = col * self.width // self.cols
+        u1 = (col + 1) * self.width // self.cols
+        v0 = row * self.height // self.rows
+        v1 = (row + 1) * self.height // self.rows
+        return u0, v0, u1, v1
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Tracker settings; defaults suit a 640x480 camera at 30 Hz."""
+
+    max_corners: int = 300          # Shi–Tomasi: at most this many tracked features
+    quality_level: float = 0.01     # Shi–Tomasi: corner quality relative to the best corner
+    min_distance_px: float = 8.0    # Shi–Tomasi: minimum spacing of features
+    block_size: int = 7
+    reseed_fraction: float = 0.7    # re-seed when fewer than this fraction of max_corners remain
+    lk_window_px: int = 15          # Lucas–Kanade window (square)
+    lk_max_level: int = 2           # pyramid levels above the base image
+    fb_threshold_px: float = 1.0    # forward–backward error above this drops the feature
+    min_flow_px: float = 0.2        # per-frame flow below this counts as 0 (LK noise on still
+    #                                 texture would otherwise keep ṡ_j from ever "rising from 0")
+    black_level: int = 8            # a frame whose brightest gray pixel is below this is skipped
+
+    def __post_init__(self):
+        if self.max_corners <= 0 or not 0.0 < self.reseed_fraction <= 1.0:
+            raise ValueError(f"invalid max_corners/reseed_fraction in {self}")
+        if self.lk_window_px < 3 or self.lk_max_level < 0 or self.fb_threshold_px <= 0:
+            raise ValueError(f"invalid Lucas–Kanade settings in {self}")
+        if self.min_flow_px < 0:
+            raise ValueError(f"min_flow_px must be >= 0, got {self.min_flow_px}")
+
+
+@dataclass
+class TrackedFeatures:
+    """The features tracked in the latest frame (K of them; all arrays have K rows).
+
+    - ``ids``: stable track id (int64); a re-seeded feature gets a new id, never a reused one.
+    - ``p_px``: pixel position (u, v) in the latest frame.
+    - ``flow_px``: displacement (du, dv) in pixels since the previous processed frame (0 for a
+      feature seeded in this frame).
+    - ``p_CP``: 3-D point P in camera frame C, metres; rows with ``valid`` False are zero and
+      must not be used (depth hole: 0, inf or NaN, or outside the depth image).
+    - ``valid``: True where ``p_CP`` is a measured point.
+    - ``cell``: grid cell index of ``p_px``.
+    - ``time``: time of the frame, seconds.
+    """
+
+    ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    p_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    flow_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    p_CP: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    valid: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    cell: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    time: float = 0.0
+
+    def __len__(self) -> int:
+        return int(self.ids.shape[0])
+
+    def copy(self) -> TrackedFeatures:
+        return dataclasses.replace(
+            self, **{f.name: np.array(getattr(self, f.name), copy=True)
+                     for f in dataclasses.fields(self) if f.name != "time"})
+
+    def __deepcopy__(self, memo):
+        return self.copy()
+
+
+@dataclass
+class TrackerState:
+    """Everything the tracker carries from frame to frame (held in a Drake abstract state).
+
+    ``copy()`` (also used by ``copy.deepcopy``, which Drake calls to clone a context) copies every
+    array, so two contexts never share mutable data.
+    """
+
+    prev_gray: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
+    ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    p_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    next_id: int = 0
+    last_time: float = -np.inf
+    frames: int = 0                 # processed frames
+    skipped: int = 0                # skipped frames (empty, black, stale)
+    sdot: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    features: TrackedFeatures = field(default_factory=TrackedFeatures)
+
+    @staticmethod
+    def initial(grid: CellGrid) -> TrackerState:
+        return TrackerState(sdot=np.zeros(grid.num_cells))
+
+    def copy(self) -> TrackerState:
+        return TrackerState(
+            prev_gray=self.prev_gray.copy(), ids=self.ids.copy(), p_px=self.p_px.copy(),
+            next_id=self.next_id, last_time=self.last_time, frames=self.frames,
+            skipped=self.skipped, sdot=self.sdot.copy(), features=self.features.copy())
+
+    def __deepcopy__(self, memo):
+        return self.copy()
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """uint8 gray image from an H x W, H x W x 1, RGB or RGBA (Drake ``ImageRgba8U``) array."""
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        raise ValueError(f"color image must be uint8, got {img.dtype}")
+    if img.ndim == 2:
+        return img
+    if img.ndim == 3 and img.shape[2] == 1:
+        return img[:, :, 0]
+    if img.ndim == 3 and img.shape[2] == 3:
+        return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+    if img.ndim == 3 and img.shape[2] == 4:
+        return cv2.cvtColor(img, cv2.COLOR_RGBA2GRAY)
+    raise ValueError(f"color image must be H x W x {{1,3,4}}, got shape {img.shape}")
+
+
+def back_project(p_px: np.ndarray, depth: np.ndarray | None,
+                 intrinsics: PinholeIntrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """3-D points ``p_CP`` (K x 3, metres) of pixels ``p_px`` from a depth image (pinhole model).
+
+    ``p_CP = ((u - cx) z / fx, (v - cy) z / fy, z)`` with z the depth (metres, along +Z of C) at
+    the nearest pixel. Depth holes (0, negative, inf, NaN), pixels outside the image and a
+    missing or empty depth image give ``valid`` False and a zero row, never a point.
+    """
+    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
+    p_CP = np.zeros((p.shape[0], 3))
+    valid = np.zeros(p.shape[0], bool)
+    if depth is None or p.shape[0] == 0:
+        return p_CP, valid
+    d = np.asarray(depth)
+    if d.ndim == 3 and d.shape[2] == 1:
+        d = d[:, :, 0]
+    if d.size == 0:
+        return p_CP, valid
+    if d.ndim != 2:
+        raise ValueError(f"depth image must be H x W or H x W x 1, got shape {np.shape(depth)}")
+    if d.shape != (intrinsics.height, intrinsics.width):
+        raise ValueError(f"depth image is {d.shape[1]}x{d.shape[0]} but the intrinsics are "
+                         f"{intrinsics.width}x{intrinsics.height}")
+    u = np.rint(p[:, 0]).astype(np.int64)
+    v = np.rint(p[:, 1]).astype(np.int64)
+    inside = (u >= 0) & (u < d.shape[1]) & (v >= 0) & (v < d.shape[0])
+    z = np.zeros(p.shape[0])
+    z[inside] = d[v[inside], u[inside]]
+    valid = inside & np.isfinite(z) & (z > 0.0)
+    zv = z[valid]
+    p_CP[valid, 0] = (p[valid, 0] - intrinsics.cx) * zv / intrinsics.fx
+    p_CP[valid, 1] = (p[valid, 1] - intrinsics.cy) * zv / intrinsics.fy
+    p_CP[valid, 2] = zv
+    return p_CP, valid
+
+
+def cell_visual_change(grid: CellGrid, p_px: np.ndarray, flow_px: np.ndarray, dt: float,
+                       min_flow_px: float = 0.0) -> np.ndarray:
+    """Per-cell visual change ``ṡ_j`` (pixels/second): sum of flow norms in cell j over ``dt``.
+
+    Flows shorter than ``min_flow_px`` count as 0 so that a still scene gives exactly ``ṡ = 0``.
+    """
+    if not dt > 0.0:
+        raise ValueError(f"frame interval must be positive, got {dt}")
+    norms = np.linalg.norm(np.asarray(flow_px, dtype=float).reshape(-1, 2), axis=1)
+    norms[norms < min_flow_px] = 0.0
+    cell = grid.cell_of(p_px)
+    keep = cell >= 0
+    return np.bincount(cell[keep], weights=norms[keep], minlength=grid.num_cells) / dt
+
+
+def _frame_is_blank(gray: np.ndarray, params: TrackerParams) -> bool:
+    return gray.size == 0 or int(gray.max()) < params.black_level
+
+
+def _seed(gray: np.ndarray, p_px: np.ndarray, params: TrackerParams, count: int) -> np.ndarray:
+    """New Shi–Tomasi corners at least ``min_distance_px`` away from the existing features."""
+    mask = np.full(gray.shape, 255, np.uint8)
+    r = max(1, int(round(params.min_distance_px)))
+    for u, v in np.rint(p_px).astype(int):
+        cv2.circle(mask, (int(u), int(v)), r, 0, -1)
+    corners = cv2.goodFeaturesToTrack(
+        gray, maxCorners=count, qualityLevel=params.quality_level,
+        minDistance=params.min_distance_px, mask=mask, blockSize=params.block_size)
+    if corners is None:
+        return np.zeros((0, 2), np.float32)
+    return corners.reshape(-1, 2).astype(np.float32)
+
+
+def _lk(prev_gray: np.ndarray, next_gray: np.ndarray, pts: np.ndarray, params: TrackerParams):
+    # OpenCV's Python binding takes images here, not pyramids from buildOpticalFlowPyramid.
+    win = (params.lk_window_px, params.lk_window_px)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03)
+    out, status, _ = cv2.calcOpticalFlowPyrLK(
+        prev_gray, next_gray, pts.reshape(-1, 1, 2), None, winSize=win,
+        maxLevel=params.lk_max_level, criteria=criteria)
+    return out.reshape(-1, 2), status.reshape(-1).astype(bool)
+
+
+def track_frame(state: TrackerState, image: np.ndarray, depth: np.ndarray | None,
+                time: float, intrinsics: PinholeIntrinsics, grid: CellGrid,
+                params: TrackerParams = TrackerParams()) -> TrackerState:
+    """Process one frame; returns the new state (the input state is not modified).
+
+    Skips (returns an unchanged copy with ``skipped`` incremented) an empty image, a black
+    image, or a frame whose ``time`` is not after the last processed one, so that a dropped
+    frame never erases the tracks. The new ``sdot`` and ``features`` are in the returned state.
+    """
+    if not np.isfinite(time):
+        raise ValueError(f"frame time must be finite, got {time}")
+    new = state.copy()
+    img = np.asarray(image)
+    if img.size == 0 or time <= state.last_time:
+        new.skipped += 1
+        return new
+    gray = to_gray(img)
+    if gray.shape != (intrinsics.height, intrinsics.width):
+        raise ValueError(f"color image is {gray.shape[1]}x{gray.shape[0]} but the intrinsics are "
+                         f"{intrinsics.width}x{intrinsics.height}")
+    if _frame_is_blank(gray, params):
+        new.skipped += 1
+        return new
+
+    have_prev = state.prev_gray.size > 0 and state.ids.size > 0
+    if have_prev:
+        # Forward then backward; a feature is kept only if both succeed and it returns to
+        # where it started (the forward–backward check rejects occlusion and patches that
+        # changed, where LK "converges" to a wrong place).
+        p0 = state.p_px.astype(np.float32)
+        p1, ok_f = _lk(state.prev_gray, gray, p0, params)
+        p0_back, ok_b = _lk(gray, state.prev_gray, p1, params)
+        fb = np.linalg.norm(p0_back - p0, axis=1)
+        h, w = gray.shape
+        inside = (p1[:, 0] >= 0) & (p1[:, 0] <= w - 1) & (p1[:, 1] >= 0) & (p1[:, 1] <= h - 1)
+        keep = ok_f & ok_b & inside & np.isfinite(p1).all(axis=1) & (fb < params.fb_threshold_px)
+        ids, pts, flow = state.ids[keep], p1[keep], (p1 - p0)[keep].astype(float)
+        dt = time - state.last_time
+        sdot = cell_visual_change(grid, pts, flow, dt, params.min_flow_px)
+    else:
+        ids = np.zeros(0, np.int64)
+        pts = np.zeros((0, 2), np.float32)
+        flow = np.zeros((0, 2))
+        sdot = np.zeros(grid.num_cells)
+
+    if ids.size < params.reseed_fraction * params.max_corners:
+        seeds = _seed(gray, pts, params, params.max_corners - ids.size)
+        if seeds.shape[0] > 0:
+            new_ids = np.arange(new.next_id, new.next_id + seeds.shape[0], dtype=np.int64)
+            new.next_id += seeds.shape[0]
+            ids = np.concatenate([ids, new_ids])
+            pts = np.concatenate([pts, seeds])
+            flow = np.concatenate([flow, np.zeros((seeds.shape[0], 2))])
+
+    p_CP, valid = back_project(pts, depth, intrinsics)
+    new.prev_gray = gray.copy()
+    new.ids = ids
+    new.p_px = pts.astype(np.float32)
+    new.last_time = float(time)
+    new.frames += 1
+    new.sdot = sdot
+    new.features = TrackedFeatures(
+        ids=ids.copy(), p_px=pts.astype(float), flow_px=flow, p_CP=p_CP, valid=valid,
+        cell=grid.cell_of(pts), time=float(time))
+    return new

@@ -1,0 +1,176 @@
+"""Eq. (27) on hand-made signals, the state's flat-vector round trip, and the body rule on a
+long synthetic run with a busy self-moving distractor."""
+
+import numpy as np
+import pytest
+
+from sustain_drake.perception.coincidence import (
+    NEVER,
+    CoincidenceParams,
+    CoincidenceState,
+    causal_and,
+    onset,
+    rho,
+    step,
+)
+from sustain_drake.perception.synthetic import SyntheticWorld, run
+
+DT = 1.0 / 30.0
+
+
+def drive(actuator_moving, visual_moving):
+    """Run the detector on boolean per-sample signals (T x n_a, T x n_c); returns the states."""
+    a_mov = np.atleast_2d(np.asarray(actuator_moving, float))
+    s_mov = np.atleast_2d(np.asarray(visual_moving, float))
+    state = CoincidenceState(a_mov.shape[1], s_mov.shape[1])
+    q = np.zeros(a_mov.shape[1])
+    states = []
+    for k in range(a_mov.shape[0]):
+        q = q + 0.5 * DT * a_mov[k]           # 0.5 rad/s while moving
+        state = step(state, (k + 1) * DT, q, 50.0 * s_mov[k])
+        states.append(state)
+    return states
+
+
+def signal(n, *intervals):
+    """Boolean signal of n samples, 1 on [start, stop) sample intervals."""
+    x = np.zeros(n, bool)
+    for start, stop in intervals:
+        x[start:stop] = True
+    return x
+
+
+def test_rho_and_onset_are_the_paper_definitions():
+    assert onset(np.array([True, True, False]), np.array([NEVER, 0.95, NEVER]), 1.0, 0.1).tolist() \
+        == [True, False, False]
+    assert rho(1.0, np.array([0.8, 0.6, NEVER, 1.0]), 0.3).tolist() == [True, False, False, True]
+
+
+def test_causal_and_needs_the_actuator_first():
+    t_a = np.array([1.0])
+    # actuator 0.1 s before the cell: fires; cell 0.1 s before the actuator: does not;
+    # same instant: fires (same sample interval); actuator onset 0.4 s old: outside τ_a.
+    t_s = np.array([1.1, 0.9, 1.0])
+    assert causal_and(1.15, t_a, 0.3, t_s, 0.3).tolist() == [[True, False, True]]
+    assert not causal_and(1.4, t_a, 0.3, np.array([1.35]), 0.3).any()
+
+
+def test_actuator_then_visual_increments_once_per_pair():
+    n = 90
+    act = signal(n, (30, 60))                 # onset at sample 30
+    vis = signal(n, (33, 60))                 # visual 0.1 s later, stays on
+    states = drive(act[:, None], vis[:, None])
+    assert states[-1].eps[0, 0] == 1          # once, although both stay on for 0.9 s
+    assert states[32].eps[0, 0] == 0 and states[33].eps[0, 0] == 1
+
+
+def test_visual_then_actuator_does_not_increment():
+    n = 90
+    states = drive(signal(n, (33, 60))[:, None], signal(n, (30, 60))[:, None])
+    assert states[-1].eps.sum() == 0
+
+
+def test_visual_outside_the_window_does_not_increment():
+    n = 90
+    # actuator onset at 30 (1.033 s), visual onset 12 samples = 0.4 s later > τ_a = 0.3 s.
+    states = drive(signal(n, (30, 80))[:, None], signal(n, (42, 80))[:, None])
+    assert states[-1].eps.sum() == 0
+
+
+def test_each_new_pair_of_onsets_increments_again():
+    n = 150
+    act = signal(n, (30, 45), (90, 105))      # two actuator onsets, quiet in between
+    vis = signal(n, (32, 47), (92, 107))
+    other = signal(n, (60, 75))               # a cell moving only while the robot is still
+    states = drive(act[:, None], np.stack([vis, other], axis=1))
+    assert states[-1].eps.tolist() == [[2, 0]]
+
+
+def test_a_one_sample_dropout_is_not_a_new_onset():
+    n = 90
+    vis = signal(n, (32, 50), (51, 70))       # one sample of 0 (a dropped frame) in the motion
+    states = drive(signal(n, (30, 70))[:, None], vis[:, None])
+    assert states[-1].eps[0, 0] == 1
+    assert states[-1].t_onset_s[0] == pytest.approx(33 * DT)
+
+
+def test_state_vector_round_trip_and_copy_are_deep():
+    states = drive(signal(60, (10, 30))[:, None], signal(60, (12, 30))[:, None])
+    s = states[-1]
+    v = s.to_vector()
+    assert v.shape == (CoincidenceState.size(1, 1),)
+    assert np.array_equal(CoincidenceState.from_vector(v, 1, 1).to_vector(), v)
+    c = s.copy()
+    c.eps[0, 0] += 5
+    assert s.eps[0, 0] == 1
+    assert np.isfinite(v).all()
+    with pytest.raises(ValueError, match="state vector"):
+        CoincidenceState.from_vector(v[:-1], 1, 1)
+
+
+def test_bad_inputs_raise_one_line_value_errors():
+    s = step(CoincidenceState(2, 3), 0.1, np.zeros(2), np.zeros(3))
+    with pytest.raises(ValueError, match="finite"):
+        step(s, 0.2, np.array([0.0, np.nan]), np.zeros(3))
+    with pytest.raises(ValueError, match="expected 2 actuator values"):
+        step(s, 0.2, np.zeros(3), np.zeros(3))
+    with pytest.raises(ValueError, match="time must increase"):
+        step(s, 0.1, np.zeros(2), np.zeros(3))
+    with pytest.raises(ValueError, match="tau_a"):
+        CoincidenceParams(tau_a=0.0)
+
+
+def test_increment_raises_a_confirming_request_at_the_onset_posture():
+    n = 60
+    states = drive(signal(n, (30, 60))[:, None], signal(n, (32, 60))[:, None])
+    s = states[-1]
+    assert s.request_active == 1 and s.request_count == 1
+    # posture at the actuator onset: the value before it moved (29 samples of rest at 0)
+    assert s.q_request[0] == pytest.approx(0.0)
+    assert s.candidates.tolist() == [1.0]
+    p = CoincidenceParams()
+    assert p.hold_min <= s.hold_time(p) <= p.hold_min + p.hold_spread
+    assert not s.body(p)[0]                   # a coincidence alone is not body
+
+
+def test_confirming_hits_make_body_and_a_miss_takes_evidence_away():
+    """Scripted confirmations: each 1.5 s cycle rests at q* = 0, moves out for 0.33 s, holds,
+    and jumps back to q* (the jump starts far from q*, so it is not a trial)."""
+    p = CoincidenceParams()
+    n_cycle, n_cycles = 45, 5
+    state = CoincidenceState(1, 2)
+    evidence_after_miss = None
+    for k in range(n_cycle * n_cycles):
+        phase, cycle = k % n_cycle, k // n_cycle
+        q = 0.5 * DT * (np.clip(phase, 15, 25) - 15) if phase < 40 else 0.0
+        body_moves = 16 <= phase < 27                  # one frame after the actuator
+        chance = cycle == 0 and 16 <= phase < 22       # coincides once, with the body cell
+        state = step(state, (k + 1) * DT, np.array([q]), 50.0 * np.array([body_moves, chance]), p)
+        if k == 2 * n_cycle:
+            evidence_after_miss = state.evidence[1]
+    assert state.body(p).tolist() == [True, False]
+    assert state.hits[0, 0] >= 2 and state.misses[0, 0] == 0
+    assert state.misses[0, 1] == 1 and evidence_after_miss < 0
+    assert state.moves(p).tolist() == [[True, False]]
+
+
+def test_busy_distractor_never_becomes_body_while_driven_cells_do():
+    """Whole pipeline on synthetic per-cell signals: 8 cells with self-caused visual onsets
+    at ~0.5/s and a robot moving at random, honouring confirming requests."""
+    world = SyntheticWorld()
+    body_cells = sorted(world.body_drivers)
+    for seed in (0, 1, 2):
+        state, times, masks, _ = run(world, 90.0, seed)
+        ever = masks.any(axis=0)
+        assert not ever[list(world.distractor_cells)].any(), seed
+        assert ever[body_cells].all(), seed
+        assert not ever[[j for j in range(world.n_c) if j not in body_cells
+                         and j not in world.distractor_cells]].any()
+        # counting alone (the paper's Σ_i ε_ij > 0) would have let the distractor through
+        assert (state.eps[:, list(world.distractor_cells)].sum(axis=0) > 0).any()
+
+
+def test_without_confirming_motions_nothing_is_body():
+    state, _, masks, _ = run(SyntheticWorld(), 30.0, 0, honour_requests=False)
+    assert not masks.any()
+    assert state.eps.sum() > 0
