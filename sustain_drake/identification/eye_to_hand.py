@@ -176,6 +176,7 @@ _T_FLAT = np.concatenate(
 
 
 _SKEW_BASIS = [skew(e) for e in np.eye(3)]
+_SMALL_STEP = 1e-6  # radians / metres
 
 
 def _jacobian(R: np.ndarray, out: np.ndarray) -> np.ndarray:
@@ -191,16 +192,16 @@ def refine(
     R: np.ndarray,
     p_WC: np.ndarray,
     p_HP: np.ndarray,
-    max_iterations: int = 20,
-    tolerance: float = 1e-8,
+    max_iterations: int = 30,
+    tolerance: float = 1e-12,
 ) -> EyeToHandEstimate:
     """Gauss-Newton on SO(3) x R^3 x R^3 of ``J = x^T S x`` (the geometric least-squares cost
     ``sum ||R_WC p_CP + p_WC - R_WH p_HP - p_WH||^2``), from the statistic alone.
 
     ``x`` is linear in the translations and ``A_t x`` is linear in ``x``, so linearising ``x`` in
     the rotation perturbation gives the Gauss-Newton step exactly. It stops when a step is below
-    ``tolerance`` (radians and metres). A step that would increase the cost is halved (at most 10
-    times), so the cost never increases.
+    ``tolerance`` (radians and metres). Far from the optimum, a step that would increase the cost is
+    halved (at most 10 times); steps below 1e-6 are taken in full.
     """
     x = pack_x(R, p_WC, p_HP)
     cost = float(x @ S @ x)
@@ -222,6 +223,17 @@ def refine(
         # happens on degenerate data, where H is singular).
         omega = math.sqrt(delta[0:3] @ delta[0:3])
         step = 1.0 if omega <= math.pi else math.pi / omega
+        if size < _SMALL_STEP:
+            # Near the optimum the cost's change is below its own round-off (x^T S x is a sum of
+            # large terms that cancel), so a cost test cannot judge the step; Gauss-Newton's full
+            # step is reliable there.
+            R = R @ so3_exp(delta[0:3])
+            p_WC, p_HP = p_WC + delta[3:6], p_HP + delta[6:9]
+            x = pack_x(R, p_WC, p_HP)
+            cost = float(x @ S @ x)
+            if size < tolerance:
+                break
+            continue
         for _ in range(10):
             R_new = R @ so3_exp(step * delta[0:3])
             p_WC_new = p_WC + step * delta[3:6]
@@ -234,8 +246,6 @@ def refine(
         else:
             break  # no decrease along the Gauss-Newton direction: at the optimum (to round-off)
         R, p_WC, p_HP, x, cost = R_new, p_WC_new, p_HP_new, x_new, cost_new
-        if step * size < tolerance:
-            break
     # Re-orthonormalise against drift from many small products (no effect on the cost).
     U, _, Vt = np.linalg.svd(R)
     R = U @ Vt
