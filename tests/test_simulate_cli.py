@@ -60,3 +60,18 @@ def test_misspelled_key_is_one_line_error_naming_it(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "sead" in err and err.count("\n") == 1
     assert not (tmp_path / "o").exists()  # nothing written on bad input
+
+
+def test_graph_writes_svg_when_dot_is_installed(tmp_path, monkeypatch, capsys):
+    # A stand-in for graphviz's dot on PATH: it must receive the .dot text on stdin.
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    fake = bin_dir / "dot"
+    fake.write_text('#!/bin/sh\n[ "$1" = "-Tsvg" ] || exit 1\n'
+                    'grep -q digraph && echo "<svg>station</svg>"\n')
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}:/usr/bin:/bin")
+    out = tmp_path / "g" / "hand_eye.dot"
+    assert main(["graph", str(HAND_EYE), "--out", str(out)]) == 0
+    assert out.with_suffix(".svg").read_text().strip() == "<svg>station</svg>"
+    assert str(out.with_suffix(".svg")) in capsys.readouterr().out

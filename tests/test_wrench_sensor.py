@@ -102,8 +102,8 @@ def test_wrench_at_rest_is_the_outboard_weight(tool):
     # The held tool alone: mass and CoM documented separately.
     m_tool = port("true_tool_mass")[0]
     assert m_tool == {"rod": 0.1, "box": 0.6, "none": 0.0}[tool]
-    # Gripper 0.25 kg + finger 0.05 kg + the tool and its two 1 g grip links.
-    assert m_o == pytest.approx(0.3 + (m_tool + 0.002 if tool != "none" else 0.0), abs=1e-9)
+    # Gripper 0.25 kg + finger 0.05 kg + the tool (and its two 10 ug grip links).
+    assert m_o == pytest.approx(0.3 + m_tool, abs=1e-4)
 
 
 def test_held_box_weight_is_what_the_wrench_adds():
@@ -113,10 +113,20 @@ def test_held_box_weight_is_what_the_wrench_adds():
     without, _, _ = rest_wrench(still_arm("none"))
     d = with_box - without
     R_WK = X_WH.rotation()
-    # The grip links (2 g) also come with the tool.
-    np.testing.assert_allclose(R_WK @ d[3:], [0, 0, 0.602 * G], atol=5 * 0.02 * np.sqrt(2))
-    assert np.linalg.norm(R_WK @ d[3:]) / G == pytest.approx(0.602, abs=0.02)
+    np.testing.assert_allclose(R_WK @ d[3:], [0, 0, 0.6 * G], atol=5 * 0.02 * np.sqrt(2))
     np.testing.assert_allclose(d[:3], np.cross(port("true_p_KCm"), d[3:]), atol=0.004)
+
+
+@pytest.mark.parametrize("tool", ["box", "none"])
+def test_gripper_compensation_leaves_the_held_object_alone(tool):
+    s = still_arm(tool)
+    s.wrench_sensor.compensate_gripper = True
+    wrench, X_WH, port = rest_wrench(s)
+    f_K = wrench[3:]
+    m_tool = port("true_tool_mass")[0]
+    np.testing.assert_allclose(X_WH.rotation() @ f_K, [0, 0, m_tool * G], atol=5 * 0.02)
+    np.testing.assert_allclose(wrench[:3], np.cross(port("true_p_KCm"), f_K),
+                               atol=5 * 0.0005)
 
 
 def test_a_touch_changes_the_wrench_by_the_touch_force():

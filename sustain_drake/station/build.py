@@ -39,7 +39,7 @@ from sustain_drake.systems.distractor import DistractorPath
 from sustain_drake.systems.disturbances import DisturbanceScheduler, Push, Step
 from sustain_drake.systems.ground_truth import GroundTruth, PointMass
 from sustain_drake.systems.motion_generator import MotionGenerator
-from sustain_drake.systems.wrench_sensor import WristWrenchSensor
+from sustain_drake.systems.wrench_sensor import GripperCompensation, WristWrenchSensor
 
 # Where the fixed furniture stands (world frame: origin at the arm's foot on the table top).
 X_W_TABLE = RigidTransform([0.25, 0.0, 0.0])
@@ -71,7 +71,8 @@ def _selector(plant: MultibodyPlant, joints, velocities: bool) -> np.ndarray:
 
 def _add_grip(plant: MultibodyPlant, scenario: Scenario, arm, tool_instance):
     """Holds the tool in the grasp frame G through the two slip joints (see GRIP_GAINS)."""
-    tiny = SpatialInertia.SolidSphereWithMass(1e-3, 0.005)
+    # Nearly massless, so the held mass is the tool's (10 ug: far below the F/T noise).
+    tiny = SpatialInertia.SolidSphereWithMass(1e-5, 0.005)
     slide_link = plant.AddRigidBody("tool_slide_link", tool_instance, tiny)
     pivot_link = plant.AddRigidBody("tool_pivot_link", tool_instance, tiny)
     grasp = plant.GetFrameByName("grasp", arm)
@@ -88,6 +89,23 @@ def _add_grip(plant: MultibodyPlant, scenario: Scenario, arm, tool_instance):
         actuator = plant.AddJointActuator(joint.name(), joint)
         actuator.set_controller_gains(GRIP_GAINS[joint.name()])
     return tool_body
+
+
+def _gripper_compensation(plant: MultibodyPlant, hand, X_HK) -> GripperCompensation:
+    """The gripper's own mass and CoM in K (the arm's bodies outboard of the sensor: palm and
+    finger, the finger at its default closed position)."""
+    context = plant.CreateDefaultContext()
+    arm = hand.model_instance()
+    bodies = [hand.index()] + [b for b in plant.GetBodiesKinematicallyAffectedBy(
+        [plant.GetJointByName("gripper_joint").index()])
+        if plant.get_body(b).model_instance() == arm]
+    X_KW = (plant.EvalBodyPoseInWorld(context, hand) @ X_HK).inverse()
+    masses = [plant.get_body(b).default_mass() for b in bodies]
+    p_KC = sum(m * (X_KW @ plant.EvalBodyPoseInWorld(context, plant.get_body(b))
+                    @ plant.get_body(b).default_com())
+               for m, b in zip(masses, bodies, strict=True)) / sum(masses)
+    g_W = plant.gravity_field().gravity_vector()
+    return GripperCompensation(sum(masses), tuple(p_KC), tuple(g_W))
 
 
 def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram:
@@ -193,13 +211,18 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
         builder.Connect(plant.get_state_output_port(), gain.get_input_port())
         builder.ExportOutput(gain.get_output_port(), name)
 
-    # Wrist force/torque sensor on the weld.
+    # Wrist force/torque sensor on the weld (K = Jc, the weld's frame on the gripper side).
     w = scenario.wrench_sensor
     sensor_joint = plant.GetJointByName(SENSOR_JOINT)
+    hand = plant.GetBodyByName(HAND_BODY)
+    X_HK = sensor_joint.frame_on_child().GetFixedPoseInBodyFrame()
+    compensation = _gripper_compensation(plant, hand, X_HK) if w.compensate_gripper else None
     wrench = builder.AddSystem(WristWrenchSensor(
-        sensor_joint.index(), 1.0 / w.rate, w.force_noise, w.torque_noise, w.bias, w.seed))
+        sensor_joint.index(), 1.0 / w.rate, w.force_noise, w.torque_noise, w.bias, w.seed,
+        compensation))
     wrench.set_name("wrench_sensor")
-    builder.Connect(plant.get_reaction_forces_output_port(), wrench.get_input_port())
+    builder.Connect(plant.get_reaction_forces_output_port(),
+                    wrench.GetInputPort("reaction_forces"))
     builder.ExportOutput(wrench.get_output_port(), "wrench")
 
     # RGB-D camera on the head.
@@ -211,8 +234,6 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
         _add_camera(builder, plant, scene_graph, scenario, camera_frame.body(), X_BS)
 
     # Hand pose and ground truth.
-    hand = plant.GetBodyByName(HAND_BODY)
-    X_HK = sensor_joint.frame_on_child().GetFixedPoseInBodyFrame()
     wrist_roll = plant.GetJointByName(ARM_JOINTS[-1])
     outboard = [b for b in plant.GetBodiesKinematicallyAffectedBy([wrist_roll.index()])
                 if b != wrist_roll.child_body().index()]
@@ -231,6 +252,10 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
         outboard=[point_mass(plant.get_body(b)) for b in outboard]))
     truth.set_name("ground_truth")
     builder.Connect(plant.get_body_poses_output_port(), truth.get_input_port())
+    if compensation is not None:
+        if not X_HK.IsExactlyIdentity():
+            raise ValueError("gripper compensation assumes the sensor frame K is the hand H")
+        builder.Connect(truth.GetOutputPort("X_WH"), wrench.GetInputPort("X_WK"))
     for port in ("X_WH", "true_X_WC", "true_p_HP", "true_tool_mass", "true_p_KCm",
                  "true_outboard_mass", "true_p_KCo"):
         builder.ExportOutput(truth.GetOutputPort(port), port)

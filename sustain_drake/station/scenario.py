@@ -101,6 +101,9 @@ class WrenchSensorConfig:
     # Constant offset added to the reading, [tau_x, tau_y, tau_z, f_x, f_y, f_z] (N m, N).
     bias: list[float] = field(default_factory=lambda: [0.0] * 6)
     seed: int = 1
+    # Subtract the gripper's own static weight (as after an F/T tool calibration), so that
+    # the reading at rest is the held object's weight alone. Off: the raw weld reaction.
+    compensate_gripper: bool = False
 
 
 @dataclasses.dataclass
