@@ -1,0 +1,90 @@
+"""Per-cell ground truth from label images, metrics, latencies, and the likelihood-map picture."""
+
+import cv2
+import numpy as np
+import pytest
+
+from sustain_drake.perception.evaluation import (
+    BACKGROUND,
+    BODY,
+    IGNORED,
+    CellTruth,
+    cell_coverage,
+    detection_latencies,
+    distractor_cells_marked,
+    draw_likelihood_map,
+    mask_metrics,
+    save_likelihood_png,
+)
+from sustain_drake.perception.optical_flow import CellGrid
+
+GRID = CellGrid(80, 40, rows=2, cols=4)         # 20 x 20 px cells
+ARM, TOOL, PERSON = 3, 4, 9
+
+
+def labels():
+    lab = np.zeros((40, 80, 1), np.int16)
+    lab[0:20, 0:20] = ARM                          # cell 0 fully arm
+    lab[0:5, 20:28] = TOOL                         # cell 1: 40 px of 400 = 10 % -> body
+    lab[20:22, 40:42] = ARM                        # cell 6: 4 px = 1 % -> ignored
+    lab[20:40, 60:80] = PERSON                     # cell 7: distractor only
+    return lab
+
+
+def test_coverage_and_truth_follow_the_ten_percent_rule():
+    cover = cell_coverage(labels(), (ARM, TOOL), GRID)
+    assert cover[[0, 1, 6]] == pytest.approx([1.0, 0.1, 0.01])
+    truth = CellTruth(GRID, body_labels=(ARM, TOOL), distractor_labels=(PERSON,))
+    truth.update(labels())
+    t = truth.truth()
+    assert t.tolist() == [BODY, BODY, BACKGROUND, BACKGROUND, BACKGROUND, BACKGROUND, IGNORED,
+                          BACKGROUND]
+    assert np.flatnonzero(truth.distractor_cells()).tolist() == [7]
+    # over an episode: the arm later covers cell 2, so it is body from then on
+    later = np.zeros((40, 80), np.int16)
+    later[0:20, 40:60] = ARM
+    truth.update(later)
+    assert truth.truth()[2] == BODY and truth.truth()[0] == BODY
+    with pytest.raises(ValueError, match="label image"):
+        cell_coverage(np.zeros((10, 10)), (ARM,), GRID)
+
+
+def test_metrics_ignore_the_ignored_cells():
+    truth = np.array([BODY, BODY, BACKGROUND, BACKGROUND, IGNORED])
+    m = mask_metrics(np.array([True, False, True, False, True]), truth)
+    assert (m["precision"], m["recall"], m["iou"]) == (0.5, 0.5, pytest.approx(1 / 3))
+    assert mask_metrics(np.zeros(5, bool), truth)["precision"] == 1.0
+    assert distractor_cells_marked(np.array([1, 0, 1, 1, 0], bool),
+                                   np.array([0, 0, 1, 0, 1], bool)) == 1
+    with pytest.raises(ValueError, match="shape"):
+        mask_metrics(np.zeros(3, bool), truth)
+
+
+def test_latency_is_first_mark_minus_first_visible_motion():
+    t = np.arange(6) * 0.5
+    vis = np.zeros((6, 3), bool)
+    mk = np.zeros((6, 3), bool)
+    vis[1:, 0] = True
+    mk[3:, 0] = True              # 1.0 s after visible motion
+    vis[2:, 1] = True             # never detected: left out
+    mk[0:, 2] = True              # marked but never visibly moving: left out
+    assert detection_latencies(t, vis, mk).tolist() == [1.0]
+
+
+def test_likelihood_picture_marks_body_red_and_motion_blue(tmp_path):
+    image = np.full((40, 80, 4), 128, np.uint8)
+    eps = np.zeros((2, 8))
+    eps[0, 0] = 3
+    body = np.zeros(8, bool)
+    body[0] = True
+    sdot = np.zeros(8)
+    sdot[5] = 10.0
+    rgb = draw_likelihood_map(image, GRID, eps, body, sdot)
+    assert rgb.shape == (40, 80, 3)
+    assert rgb[10, 10, 0] > 200 and rgb[10, 10, 2] < 100          # body cell shaded red
+    assert tuple(rgb[20, 30]) == (0, 0, 255)                        # moving cell outlined blue
+    assert tuple(rgb[10, 50]) == (128, 128, 128)                    # untouched
+    path = tmp_path / "likelihood.png"
+    save_likelihood_png(path, image, GRID, eps, body, sdot)
+    back = cv2.imread(str(path))
+    assert back.shape == (40, 80, 3) and back[10, 10, 2] > 200      # BGR on disk
