@@ -119,6 +119,12 @@ class EyeToHandSolution:
     def expected_rms(self) -> float:
         return math.sqrt(max(self.expected_mse, 0.0))
 
+    @property
+    def x(self) -> np.ndarray:
+        """The best estimate's 16-vector (zeros when there is none)."""
+        est = self.estimate
+        return est.x if est is not None else np.zeros(N_UNKNOWNS)
+
 
 def build_A(p_CP: np.ndarray, R_WH: np.ndarray, p_WH: np.ndarray, out: np.ndarray | None = None):
     """``A_t`` of Eq. (35) (3 x 16) for one sample."""

@@ -92,6 +92,11 @@ class PayloadSolution:
     def expected_rms(self) -> float:
         return math.sqrt(max(self.expected_mse, 0.0))
 
+    @property
+    def ssd(self) -> float:
+        """No rotation in this formulation: always 0 (kept for a uniform solution interface)."""
+        return 0.0
+
 
 class PayloadIdentifier:
     """The sustainable identifier with the static payload formulation.

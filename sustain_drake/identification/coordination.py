@@ -1,0 +1,124 @@
+"""The identify <-> observe rule of sustainable coordination (paper §3.1 end, §4.3), pure python.
+
+IDENTIFY: samples accumulate in the identifier; when its verdict says converged, the estimate is
+adopted together with an allowable error derived from the identification itself,
+``sigma = allowable_error_factor * a^2 lambda_N`` (the paper: 100 lambda_16), the motion pauses
+(the paper: 3 s) and the mode becomes OBSERVE.
+
+OBSERVE: each new sample's error under the adopted estimate, ``s_t = ||A_t x||^2`` (Eq. (2)), is
+compared with ``sigma``; after ``max_consecutive_violations`` consecutive samples over it (the
+paper: 10) a change of the body is declared, the identifier's statistic is reset and the mode
+goes back to IDENTIFY. A sample within the limit clears the count.
+
+The state is a small flat vector (``CoordinationState``) so that a Drake system can hold it in its
+context; ``step`` is a pure function of it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+IDENTIFY = 0
+OBSERVE = 1
+MODE_NAMES = {IDENTIFY: "IDENTIFY", OBSERVE: "OBSERVE"}
+
+CONVERGED = "converged"
+CHANGE_DETECTED = "change_detected"
+
+
+@dataclass(frozen=True)
+class CoordinationRule:
+    """The thresholds of the rule (all settable from a scenario file).
+
+    Attributes:
+        allowable_error_factor: ``sigma = factor * a^2 lambda_N`` (paper: 100).
+        max_consecutive_violations: this many consecutive samples over ``sigma`` is a change
+            (paper: 10; so 9 do nothing).
+        pause_after_convergence: seconds the motion pauses after a convergence (paper: 3 s).
+    """
+
+    allowable_error_factor: float = 100.0
+    max_consecutive_violations: int = 10
+    pause_after_convergence: float = 3.0
+
+    def __post_init__(self):
+        if not (self.allowable_error_factor > 0 and math.isfinite(self.allowable_error_factor)):
+            raise ValueError(f"allowable_error_factor must be positive, got {self.allowable_error_factor}")
+        if not self.max_consecutive_violations >= 1:
+            raise ValueError(
+                f"max_consecutive_violations must be >= 1, got {self.max_consecutive_violations}"
+            )
+        if not self.pause_after_convergence >= 0:
+            raise ValueError(f"pause_after_convergence must be >= 0, got {self.pause_after_convergence}")
+
+
+# Layout of the state vector.
+MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS = range(8)
+STATE_SIZE = 8
+
+
+def initial_state() -> np.ndarray:
+    """IDENTIFY, no violations, no adopted model, no requests yet, no sample seen (-1)."""
+    state = np.zeros(STATE_SIZE)
+    state[LAST_SAMPLE] = -1.0
+    return state
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something the rule decided, at a time in seconds."""
+
+    time: float
+    kind: str  # CONVERGED or CHANGE_DETECTED
+    detail: str = ""
+
+
+def step(
+    state: np.ndarray,
+    rule: CoordinationRule,
+    time: float,
+    converged: bool,
+    expected_mse: float,
+    sample_count: int,
+    sample_error: float,
+) -> tuple[np.ndarray, Event | None]:
+    """One tick of the rule. Returns the new state (a copy) and the event it decided, if any.
+
+    Args:
+        state: the current state vector.
+        rule: the thresholds.
+        time: now, seconds (for the event).
+        converged: the identifier's current verdict.
+        expected_mse: the identifier's current ``a^2 lambda_N``.
+        sample_count: how many valid samples the identifier has seen in all (a new sample is a
+            change of this count).
+        sample_error: ``s_t`` of the newest sample under the ADOPTED estimate (OBSERVE only).
+    """
+    new = state.copy()
+    new_sample = sample_count != int(state[LAST_SAMPLE])
+    new[LAST_SAMPLE] = sample_count
+    if int(state[MODE]) == IDENTIFY:
+        if converged and math.isfinite(expected_mse):
+            new[MODE] = OBSERVE
+            new[VIOLATIONS] = 0
+            new[SIGMA] = rule.allowable_error_factor * max(expected_mse, 0.0)
+            new[PAUSE_ID] += 1
+            new[CONVERGENCES] += 1
+            return new, Event(time, CONVERGED, f"allowable error {new[SIGMA]:.3g}")
+        return new, None
+    if not new_sample:
+        return new, None
+    if sample_error > state[SIGMA] or not math.isfinite(sample_error):
+        new[VIOLATIONS] += 1
+    else:
+        new[VIOLATIONS] = 0
+    if new[VIOLATIONS] >= rule.max_consecutive_violations:
+        new[MODE] = IDENTIFY
+        new[VIOLATIONS] = 0
+        new[RESET_COUNT] += 1
+        new[DETECTIONS] += 1
+        return new, Event(time, CHANGE_DETECTED, f"{rule.max_consecutive_violations} samples over the limit")
+    return new, None

@@ -1,0 +1,111 @@
+"""The identify <-> observe state machine of sustainable coordination as a Drake system."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from sustain_drake.identification import coordination
+from sustain_drake.identification.coordination import CoordinationRule
+
+
+class CoordinationStateMachine(LeafSystem):
+    """Modes IDENTIFY and OBSERVE with the paper's rule (``identification.coordination``).
+
+    .. pydrake_system::
+
+        name: CoordinationStateMachine
+        input_ports:
+        - solution
+        - observation
+        output_ports:
+        - mode
+        - adopted_x
+        - adopted_solution
+        - allowable_error
+        - reset
+        - pause
+        - events
+
+    Inputs come from a ``SustainableIdentifierSystem``: ``solution`` (its abstract solution, with
+    the verdict and ``a^2 lambda_N``) and ``observation`` (``[sample_count, s_t]``, where ``s_t``
+    is the newest sample's error under ``adopted_x``: connect ``adopted_x`` to the identifier's
+    ``reference_x``).
+
+    Outputs: ``mode`` (1: 0 IDENTIFY, 1 OBSERVE); ``adopted_x`` (N, zeros before the first
+    convergence); ``adopted_solution`` (the identifier's solution at adoption, or None);
+    ``allowable_error`` (1, ``sigma = factor * a^2 lambda_N`` at adoption, in the formulation's
+    squared residual units; 0 before); ``reset`` (1, a counter: connect to the identifier's
+    ``reset``, which clears its statistic when the count changes); ``pause`` (2,
+    ``[request_id, seconds]``: connect to the motion generator's ``pause``); ``events`` (a tuple
+    of ``coordination.Event``: every convergence and change detection with its time).
+
+    Every ``period`` seconds (a periodic unrestricted update, at the identifier's rate) it applies
+    ``coordination.step``. State: the rule's vector and the adopted ``x`` (discrete), the adopted
+    solution and the event log (abstract).
+    """
+
+    def __init__(self, num_unknowns: int, rule: CoordinationRule | None = None, period: float = 1.0 / 30.0):
+        super().__init__()
+        if not period > 0:
+            raise ValueError(f"period must be > 0, got {period}")
+        self._rule = rule or CoordinationRule()
+        self._solution_in = self.DeclareAbstractInputPort("solution", AbstractValue.Make(object()))
+        self._observation = self.DeclareVectorInputPort("observation", 2)
+        self._state = self.DeclareDiscreteState(coordination.initial_state())
+        self._adopted_x = self.DeclareDiscreteState(np.zeros(num_unknowns))
+        self._adopted = self.DeclareAbstractState(AbstractValue.Make(None))
+        self._events = self.DeclareAbstractState(AbstractValue.Make(()))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+        state = {self.all_state_ticket()}
+        self.DeclareVectorOutputPort(
+            "mode", 1, lambda c, o: o.SetAtIndex(0, self._vector(c)[coordination.MODE]),
+            prerequisites_of_calc=state,
+        )  # fmt: skip
+        self.DeclareStateOutputPort("adopted_x", self._adopted_x)
+        self.DeclareStateOutputPort("adopted_solution", self._adopted)
+        self.DeclareVectorOutputPort(
+            "allowable_error", 1, lambda c, o: o.SetAtIndex(0, self._vector(c)[coordination.SIGMA]),
+            prerequisites_of_calc=state,
+        )  # fmt: skip
+        self.DeclareVectorOutputPort(
+            "reset", 1, lambda c, o: o.SetAtIndex(0, self._vector(c)[coordination.RESET_COUNT]),
+            prerequisites_of_calc=state,
+        )  # fmt: skip
+        self.DeclareVectorOutputPort(
+            "pause", 2,
+            lambda c, o: o.SetFromVector(
+                [self._vector(c)[coordination.PAUSE_ID], self._rule.pause_after_convergence]
+            ),
+            prerequisites_of_calc=state,
+        )  # fmt: skip
+        self.DeclareStateOutputPort("events", self._events)
+
+    @property
+    def rule(self) -> CoordinationRule:
+        return self._rule
+
+    def _vector(self, context) -> np.ndarray:
+        return context.get_discrete_state(self._state).value()
+
+    def mode(self, context) -> int:
+        return int(self._vector(context)[coordination.MODE])
+
+    def events(self, context) -> tuple:
+        return context.get_abstract_state(self._events).get_value()
+
+    def _update(self, context, state) -> None:
+        solution = self._solution_in.Eval(context)
+        sample_count, sample_error = self._observation.Eval(context)
+        new, event = coordination.step(
+            self._vector(context), self._rule, context.get_time(), solution.verdict.converged,
+            solution.expected_mse, int(sample_count), float(sample_error),
+        )  # fmt: skip
+        state.get_mutable_discrete_state(self._state).set_value(new)
+        if event is not None:
+            state.get_mutable_abstract_state(self._events).set_value(self.events(context) + (event,))
+            if event.kind == coordination.CONVERGED:
+                state.get_mutable_abstract_state(self._adopted).set_value(solution)
+                state.get_mutable_discrete_state(self._adopted_x).set_value(solution.x)

@@ -1,0 +1,269 @@
+"""The sustainable identifier (paper §3.1) as a Drake system, for any formulation.
+
+A formulation (``EyeToHandFormulation``, ``PayloadFormulation``) says which sample input ports the
+system has and how a sample becomes ``A_t``; the statistic and the latest solution live in the
+context, so contexts can be cloned and simulations run in parallel.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from sustain_drake.identification import eye_to_hand, payload
+from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, SustainableIdentifier
+
+
+class EyeToHandFormulation:
+    """Eye-to-hand (§3.4, N = 16). Sample ports: ``p_CP`` (3, m: the body feature's point in the
+    camera frame) and ``X_WH`` (RigidTransform: the hand pose). Extra outputs: ``X_WC``
+    (RigidTransform) and ``p_HP`` (3, m) of the current best estimate (identity / zeros before
+    there is one).
+
+    Args:
+        criteria: convergence criteria (``eye_to_hand.default_criteria()`` if None).
+        forgetting_factor: see ``SustainableIdentifier``.
+        refine: run the Gauss-Newton refinement at every solve (about 80 us), so the estimate is
+            always the least-squares one.
+    """
+
+    num_unknowns = eye_to_hand.N_UNKNOWNS
+
+    def __init__(self, criteria: ConvergenceCriteria | None = None, forgetting_factor: float = 1.0,
+                 refine: bool = True):  # fmt: skip
+        self.criteria = criteria or eye_to_hand.default_criteria()
+        self.forgetting_factor = forgetting_factor
+        self.refine = refine
+
+    def make_identifier(self) -> eye_to_hand.EyeToHandIdentifier:
+        return eye_to_hand.EyeToHandIdentifier(self.forgetting_factor, self.criteria)
+
+    def declare_sample_inputs(self, system: LeafSystem) -> tuple:
+        return (
+            system.DeclareVectorInputPort("p_CP", 3),
+            system.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform())),
+        )
+
+    def read_sample(self, ports, context):
+        p_CP = ports[0].Eval(context)
+        X_WH = ports[1].Eval(context)
+        R_WH, p_WH = X_WH.rotation().matrix(), X_WH.translation()
+        if not math.isfinite(p_CP.sum() + R_WH.sum() + p_WH.sum()):
+            return None
+        return (np.array(p_CP), R_WH, p_WH)
+
+    def add(self, identifier, sample) -> None:
+        identifier.add(*sample)
+
+    def build_A(self, sample) -> np.ndarray:
+        return eye_to_hand.build_A(*sample)
+
+    def solve(self, identifier):
+        return identifier.solve(refine_estimate=self.refine)
+
+    def declare_outputs(self, system: LeafSystem, solution_of) -> None:
+        def calc_X_WC(context, output):
+            est = solution_of(context).estimate
+            output.set_value(RigidTransform() if est is None else RigidTransform(est.X_WC))
+
+        def calc_p_HP(context, output):
+            est = solution_of(context).estimate
+            output.SetFromVector(np.zeros(3) if est is None else est.p_HP)
+
+        system.DeclareAbstractOutputPort(
+            "X_WC", lambda: AbstractValue.Make(RigidTransform()), calc_X_WC,
+            prerequisites_of_calc={system.all_state_ticket()},
+        )  # fmt: skip
+        system.DeclareVectorOutputPort(
+            "p_HP", 3, calc_p_HP, prerequisites_of_calc={system.all_state_ticket()}
+        )
+
+
+class PayloadFormulation:
+    """Static payload (§4.4, N = 5). Sample ports: ``wrench`` (6: ``[tau_K; f_K]``, N m and N, the
+    sign convention of ``identification.payload``) and ``X_WK`` (RigidTransform: the sensor
+    pose; only its rotation is used). Extra outputs: ``mass`` (1, kg) and ``p_KCm`` (3, m).
+
+    Args:
+        gravity_W: gravity in the world, m/s^2.
+        criteria: convergence criteria (``payload.default_criteria()`` if None).
+        forgetting_factor: see ``SustainableIdentifier``.
+    """
+
+    num_unknowns = payload.N_UNKNOWNS
+
+    def __init__(self, gravity_W=payload.STANDARD_GRAVITY_W, criteria: ConvergenceCriteria | None = None,
+                 forgetting_factor: float = 1.0):  # fmt: skip
+        self.gravity_W = np.asarray(gravity_W, dtype=float)
+        self.criteria = criteria or payload.default_criteria()
+        self.forgetting_factor = forgetting_factor
+
+    def make_identifier(self) -> payload.PayloadIdentifier:
+        return payload.PayloadIdentifier(self.gravity_W, self.forgetting_factor, self.criteria)
+
+    def declare_sample_inputs(self, system: LeafSystem) -> tuple:
+        return (
+            system.DeclareVectorInputPort("wrench", 6),
+            system.DeclareAbstractInputPort("X_WK", AbstractValue.Make(RigidTransform())),
+        )
+
+    def read_sample(self, ports, context):
+        wrench = ports[0].Eval(context)
+        R_WK = ports[1].Eval(context).rotation().matrix()
+        if not math.isfinite(wrench.sum() + R_WK.sum()):
+            return None
+        return (np.array(wrench), R_WK)
+
+    def add(self, identifier, sample) -> None:
+        identifier.add(*sample)
+
+    def build_A(self, sample) -> np.ndarray:
+        return payload.build_A(sample[0], sample[1], self.gravity_W)
+
+    def solve(self, identifier):
+        return identifier.solve()
+
+    def declare_outputs(self, system: LeafSystem, solution_of) -> None:
+        system.DeclareVectorOutputPort(
+            "mass", 1, lambda context, out: out.SetAtIndex(0, solution_of(context).mass),
+            prerequisites_of_calc={system.all_state_ticket()},
+        )  # fmt: skip
+        system.DeclareVectorOutputPort(
+            "p_KCm", 3, lambda context, out: out.SetFromVector(solution_of(context).p_KCm),
+            prerequisites_of_calc={system.all_state_ticket()},
+        )  # fmt: skip
+
+
+# Layout of the bookkeeping discrete state.
+_LAST_RESET, _SAMPLE_COUNT, _SAMPLE_ERROR = range(3)
+
+
+class SustainableIdentifierSystem(LeafSystem):
+    """Accumulates samples in the constant-memory statistic of §3.1 and solves it every sample.
+
+    .. pydrake_system::
+
+        name: SustainableIdentifierSystem
+        input_ports:
+        - <sample ports of the formulation> (eye-to-hand: p_CP, X_WH; payload: wrench, X_WK)
+        - sample_valid (optional)
+        - reset (optional)
+        - reference_x (optional)
+        output_ports:
+        - eigenvalues
+        - x
+        - ssd
+        - verdict
+        - expected_mse
+        - observation
+        - solution
+        - <outputs of the formulation> (eye-to-hand: X_WC, p_HP; payload: mass, p_KCm)
+
+    Every ``period`` seconds (a periodic unrestricted update) it reads one sample, adds it unless
+    ``sample_valid`` (1: > 0.5 is valid; unconnected = always valid) says not or it is not
+    finite, and solves.
+
+    - ``reset`` (1) is edge-triggered: whenever its value differs from the last one seen, the
+      statistic is cleared before the sample is added (a state machine counts resets up).
+    - ``reference_x`` (N): when connected and non-zero, ``observation``'s error is computed under
+      this estimate (the adopted one) instead of the identifier's own.
+    - ``eigenvalues`` (N, descending), ``x`` (N, the best estimate, zeros before one), ``ssd``
+      (1), ``expected_mse`` (1, ``a^2 lambda_N``), ``verdict`` (2: ``[converged 0/1,
+      num_samples]``), ``observation`` (2: ``[sample_count, s_t]``: valid samples seen since
+      construction, never reset, and ``s_t = ||A_t x||^2`` of the latest one under the reference
+      estimate, before it was added), ``solution`` (the formulation's solution object, with the
+      verdict's reason).
+
+    State: discrete group 0 is the statistic (N^2 + 2), group 1 ``[last reset value,
+    sample_count, s_t]``; the solution is abstract state.
+    """
+
+    def __init__(self, formulation, period: float = 1.0 / 30.0):
+        super().__init__()
+        if not period > 0:
+            raise ValueError(f"period must be > 0, got {period}")
+        self._formulation = formulation
+        n = formulation.num_unknowns
+        self._n = n
+        self._sample_ports = formulation.declare_sample_inputs(self)
+        self._valid = self.DeclareVectorInputPort("sample_valid", 1)
+        self._reset = self.DeclareVectorInputPort("reset", 1)
+        self._reference = self.DeclareVectorInputPort("reference_x", n)
+        empty = formulation.make_identifier()
+        self._statistic = self.DeclareDiscreteState(empty.state)
+        self._book = self.DeclareDiscreteState(np.zeros(3))
+        self._solution = self.DeclareAbstractState(AbstractValue.Make(formulation.solve(empty)))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+        state = {self.all_state_ticket()}
+        self.DeclareVectorOutputPort("eigenvalues", n, self._calc_eigenvalues, prerequisites_of_calc=state)
+        self.DeclareVectorOutputPort("x", n, self._calc_x, prerequisites_of_calc=state)
+        self.DeclareVectorOutputPort(
+            "ssd", 1, lambda c, o: o.SetAtIndex(0, _finite(self.solution(c).ssd)), prerequisites_of_calc=state
+        )
+        self.DeclareVectorOutputPort("verdict", 2, self._calc_verdict, prerequisites_of_calc=state)
+        self.DeclareVectorOutputPort(
+            "expected_mse", 1, lambda c, o: o.SetAtIndex(0, _finite(self.solution(c).expected_mse)),
+            prerequisites_of_calc=state,
+        )  # fmt: skip
+        self.DeclareVectorOutputPort(
+            "observation", 2,
+            lambda c, o: o.SetFromVector(c.get_discrete_state(self._book).value()[_SAMPLE_COUNT:]),
+            prerequisites_of_calc=state,
+        )  # fmt: skip
+        self.DeclareStateOutputPort("solution", self._solution)
+        formulation.declare_outputs(self, self.solution)
+
+    @property
+    def formulation(self):
+        return self._formulation
+
+    def solution(self, context):
+        """The latest solution held in ``context``."""
+        return context.get_abstract_state(self._solution).get_value()
+
+    def _update(self, context, state) -> None:
+        book = context.get_discrete_state(self._book).value().copy()
+        identifier = self._formulation.make_identifier()
+        identifier.set_state(context.get_discrete_state(self._statistic).value())
+        if self._reset.HasValue(context):
+            reset = float(self._reset.Eval(context)[0])
+            if reset != book[_LAST_RESET]:
+                identifier.reset()
+                book[_LAST_RESET] = reset
+        valid = not self._valid.HasValue(context) or self._valid.Eval(context)[0] > 0.5
+        sample = self._formulation.read_sample(self._sample_ports, context) if valid else None
+        if sample is not None:
+            reference = self._reference.Eval(context) if self._reference.HasValue(context) else None
+            if reference is None or not np.any(reference):
+                reference = self.solution(context).x
+            error = SustainableIdentifier.sample_error(self._formulation.build_A(sample), reference)
+            try:
+                self._formulation.add(identifier, sample)
+            except ValueError:
+                sample = None  # not finite once squared (absurd magnitudes): skipped like NaN
+            else:
+                book[_SAMPLE_COUNT] += 1
+                book[_SAMPLE_ERROR] = _finite(error)
+        state.get_mutable_discrete_state(self._statistic).set_value(identifier.state)
+        state.get_mutable_discrete_state(self._book).set_value(book)
+        state.get_mutable_abstract_state(self._solution).set_value(self._formulation.solve(identifier))
+
+    def _calc_eigenvalues(self, context, output) -> None:
+        output.SetFromVector(self.solution(context).eigenvalues)
+
+    def _calc_x(self, context, output) -> None:
+        output.SetFromVector(self.solution(context).x)
+
+    def _calc_verdict(self, context, output: BasicVector) -> None:
+        solution = self.solution(context)
+        output.SetFromVector([1.0 if solution.verdict.converged else 0.0, solution.num_samples])
+
+
+def _finite(value: float) -> float:
+    """Outputs never carry NaN: an undefined error, SSD or MSE (no estimate yet) is +inf."""
+    return math.inf if math.isnan(value) else float(value)

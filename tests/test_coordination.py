@@ -1,0 +1,144 @@
+"""The identify <-> observe rule (pure) and the identifier + state machine systems in a diagram."""
+
+import numpy as np
+import pytest
+from eye_to_hand_data import make_truth, rotation_error_deg
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from scipy.spatial.transform import Rotation
+
+from sustain_drake.identification import coordination
+from sustain_drake.identification.coordination import CoordinationRule
+from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
+from sustain_drake.systems.sustainable_identifier_system import (
+    EyeToHandFormulation,
+    SustainableIdentifierSystem,
+)
+
+RULE = CoordinationRule()
+
+
+def run_rule(signals, state=None):
+    """signals: (converged, expected_mse, sample_count, sample_error) per tick."""
+    state = coordination.initial_state() if state is None else state
+    events = []
+    for k, (conv, mse, count, err) in enumerate(signals):
+        state, event = coordination.step(state, RULE, k * 0.1, conv, mse, count, err)
+        if event:
+            events.append(event)
+    return state, events
+
+
+def test_converges_then_observes():
+    state, events = run_rule([(False, 1.0, 1, 0.0), (False, 1.0, 2, 0.0), (True, 1e-6, 3, 0.0)])
+    assert [e.kind for e in events] == [coordination.CONVERGED]
+    assert events[0].time == pytest.approx(0.2)
+    assert state[coordination.MODE] == coordination.OBSERVE
+    assert state[coordination.SIGMA] == pytest.approx(100 * 1e-6)  # the paper's 100 lambda
+    assert state[coordination.PAUSE_ID] == 1
+
+
+def observing_state():
+    state, _ = run_rule([(True, 1e-6, 1, 0.0)])
+    return state
+
+
+def test_nine_violations_do_nothing_ten_switch():
+    over = 2e-4  # > sigma = 1e-4
+    state, events = run_rule([(True, 1e-6, 2 + k, over) for k in range(9)], observing_state())
+    assert not events and state[coordination.MODE] == coordination.OBSERVE
+    assert state[coordination.VIOLATIONS] == 9
+    state, events = run_rule([(True, 1e-6, 11, over)], state)
+    assert [e.kind for e in events] == [coordination.CHANGE_DETECTED]
+    assert state[coordination.MODE] == coordination.IDENTIFY
+    assert state[coordination.RESET_COUNT] == 1
+
+
+def test_a_good_sample_clears_the_count_and_repeated_ticks_count_once():
+    over, ok = 2e-4, 5e-5
+    signals = [(True, 1e-6, 2 + k, over) for k in range(9)] + [(True, 1e-6, 11, ok)]
+    signals += [(True, 1e-6, 12 + k, over) for k in range(9)]
+    state, events = run_rule(signals, observing_state())
+    assert not events and state[coordination.VIOLATIONS] == 9
+    # The same sample seen on 5 more ticks (no new sample): not counted again.
+    state, events = run_rule([(True, 1e-6, 20, over)] * 5, state)
+    assert not events and state[coordination.VIOLATIONS] == 9
+
+
+def test_rule_validation():
+    with pytest.raises(ValueError, match="max_consecutive_violations"):
+        CoordinationRule(max_consecutive_violations=0)
+    with pytest.raises(ValueError, match="allowable_error_factor"):
+        CoordinationRule(allowable_error_factor=float("nan"))
+
+
+class ScriptedHandPoint(LeafSystem):
+    """A hand moving to a new random pose every tick and a point on it seen by a fixed camera,
+    with 1 mm noise; the point moves on the hand (a slip) at ``t_slip``."""
+
+    def __init__(self, truth, p_HP_after, t_slip, period):
+        super().__init__()
+        self._truth, self._after, self._t_slip, self._period = truth, p_HP_after, t_slip, period
+        self.DeclareVectorOutputPort("p_CP", 3, self._calc_p)
+        self.DeclareAbstractOutputPort("X_WH", lambda: AbstractValue.Make(RigidTransform()), self._calc_X)
+
+    def _pose(self, context):
+        k = int(round(context.get_time() / self._period))
+        rng = np.random.default_rng([7, k])
+        R = Rotation.random(random_state=rng).as_matrix()
+        p = rng.uniform(-0.3, 0.3, 3) + [0.4, 0.0, 0.3]
+        return R, p, rng
+
+    def _calc_X(self, context, output):
+        R, p, _ = self._pose(context)
+        output.set_value(RigidTransform(np.vstack([np.column_stack([R, p]), [0, 0, 0, 1]])))
+
+    def _calc_p(self, context, output):
+        R, p, rng = self._pose(context)
+        p_HP = self._truth.p_HP if context.get_time() < self._t_slip else self._after
+        p_W = R @ p_HP + p
+        X_WC = self._truth.X_WC
+        output.SetFromVector(X_WC[:3, :3].T @ (p_W - X_WC[:3, 3]) + rng.normal(0, 1e-3, 3))
+
+
+def build(t_slip, period=0.1):
+    truth = make_truth(21)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ScriptedHandPoint(truth, truth.p_HP + [0.03, -0.02, 0.01], t_slip, period))
+    ident = builder.AddSystem(SustainableIdentifierSystem(EyeToHandFormulation(), period=period))
+    sm = builder.AddSystem(CoordinationStateMachine(16, period=period))
+    builder.Connect(source.GetOutputPort("p_CP"), ident.GetInputPort("p_CP"))
+    builder.Connect(source.GetOutputPort("X_WH"), ident.GetInputPort("X_WH"))
+    builder.Connect(ident.GetOutputPort("solution"), sm.GetInputPort("solution"))
+    builder.Connect(ident.GetOutputPort("observation"), sm.GetInputPort("observation"))
+    builder.Connect(sm.GetOutputPort("adopted_x"), ident.GetInputPort("reference_x"))
+    builder.Connect(sm.GetOutputPort("reset"), ident.GetInputPort("reset"))
+    diagram = builder.Build()
+    return truth, diagram, ident, sm
+
+
+def test_loop_converges_detects_a_slip_and_reconverges():
+    truth, diagram, ident, sm = build(t_slip=8.0)
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    simulator.AdvanceTo(7.9)
+    sm_context = sm.GetMyContextFromRoot(context)
+    events = sm.events(sm_context)
+    assert [e.kind for e in events] == [coordination.CONVERGED]
+    assert events[0].time < 3.0  # 10 samples at 10 Hz minimum; well-spread poses converge fast
+    adopted = sm.GetOutputPort("adopted_solution").Eval(sm_context)
+    assert rotation_error_deg(adopted.estimate.R_WC, truth.X_WC[:3, :3]) < 0.5
+    assert np.linalg.norm(adopted.estimate.p_WC - truth.X_WC[:3, 3]) < 5e-3
+    # Cloned contexts are independent (all state is in the context).
+    clone = context.Clone()
+    simulator.AdvanceTo(15.0)
+    events = sm.events(sm_context)
+    kinds = [e.kind for e in events]
+    assert kinds == [coordination.CONVERGED, coordination.CHANGE_DETECTED, coordination.CONVERGED]
+    assert 8.0 < events[1].time <= 8.0 + 11 * 0.1 + 1e-9  # ten samples over the limit
+    new = sm.GetOutputPort("adopted_solution").Eval(sm_context).estimate
+    assert np.linalg.norm(new.p_HP - (truth.p_HP + [0.03, -0.02, 0.01])) < 5e-3
+    assert len(sm.events(sm.GetMyContextFromRoot(clone))) == 1
+    assert sm.GetOutputPort("pause").Eval(sm_context)[0] == 2  # one pause request per convergence
