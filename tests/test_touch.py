@@ -1,0 +1,77 @@
+"""Touch estimation on the held object (§3.5): the line of action meets the known shape."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from sustain_drake.identification.payload import STANDARD_GRAVITY_W
+from sustain_drake.identification.touch import Box, Cylinder, Sphere, locate_touch, predicted_wrench
+
+
+def pose(rpy=(0.0, 0.0, 0.0), p=(0.0, 0.0, 0.0)):
+    X = np.eye(4)
+    X[:3, :3] = Rotation.from_euler("xyz", rpy).as_matrix()
+    X[:3, 3] = p
+    return X
+
+
+def residual_for(p_KP, F_env_K):
+    """The sensor's extra wrench [tau_c; f_c] balancing F_env applied at P (f_c = -F_env)."""
+    f_c = -np.asarray(F_env_K, dtype=float)
+    return np.concatenate([np.cross(p_KP, f_c), f_c])
+
+
+X_KG = pose((0.2, -0.1, 0.4), (0.01, -0.02, 0.15))
+
+
+@pytest.mark.parametrize(
+    ("shape", "p_GP", "n_G"),
+    [
+        (Box((0.1, 0.08, 0.06)), [0.02, -0.01, 0.03], [0, 0, 1]),  # top face
+        (Sphere(0.05), 0.05 * np.array([0.6, 0.0, 0.8]), [0.6, 0.0, 0.8]),
+        (Cylinder(0.03, 0.2), [0.03, 0.0, 0.05], [1, 0, 0]),  # side
+        (Cylinder(0.03, 0.2), [0.01, -0.01, -0.1], [0, 0, -1]),  # bottom cap
+    ],
+)
+def test_known_contact_is_recovered(shape, p_GP, n_G):
+    p_KP = X_KG[:3, :3] @ np.asarray(p_GP, float) + X_KG[:3, 3]
+    n_K = X_KG[:3, :3] @ np.asarray(n_G, float)
+    # The environment pushes into the surface, with a tangential (friction) part.
+    tangent = np.cross(n_K, [0.3, -0.5, 0.8])
+    F_env = -6.0 * n_K / np.linalg.norm(n_K) + 1.5 * tangent / np.linalg.norm(tangent)
+    touch = locate_touch(residual_for(p_KP, F_env), shape, X_KG)
+    assert touch.distance == 0.0
+    assert np.linalg.norm(touch.p_KP - p_KP) < 1e-9
+    assert np.allclose(touch.f_env_K, F_env)
+    assert float(touch.n_K @ F_env) < 0  # pushing into the surface
+
+
+def test_a_corner_pushed_towards_the_centre():
+    p_GP = np.array([-0.05, 0.04, -0.03])  # a corner of the box
+    p_KP = X_KG[:3, :3] @ p_GP + X_KG[:3, 3]
+    F_env = X_KG[:3, :3] @ (-8.0 * p_GP / np.linalg.norm(p_GP))
+    touch = locate_touch(residual_for(p_KP, F_env), Box((0.1, 0.08, 0.06)), X_KG)
+    assert touch.distance == 0.0 and np.linalg.norm(touch.p_KP - p_KP) < 1e-9
+
+
+def test_the_kept_intersection_is_where_the_force_pushes_in():
+    box = Box((0.2, 0.2, 0.2))
+    # Pushing down on the top face at (0, 0, 0.1): the line also crosses the bottom face.
+    touch = locate_touch(residual_for([0.0, 0.0, 0.1], [0.0, 0.0, -5.0]), box, np.eye(4))
+    assert np.allclose(touch.p_KP, [0.0, 0.0, 0.1])
+    # The same line with the force reversed (pulling up = pushing up on the bottom face).
+    touch = locate_touch(residual_for([0.0, 0.0, -0.1], [0.0, 0.0, 5.0]), box, np.eye(4))
+    assert np.allclose(touch.p_KP, [0.0, 0.0, -0.1])
+
+
+def test_no_force_no_touch_and_a_miss_is_flagged():
+    assert locate_touch(np.zeros(6), Sphere(0.1), np.eye(4)) is None
+    touch = locate_touch(residual_for([0.5, 0.0, 0.0], [0.0, 0.0, -5.0]), Sphere(0.1), np.eye(4))
+    assert touch.distance == pytest.approx(0.4)
+
+
+def test_predicted_wrench_matches_the_payload_convention():
+    R = Rotation.from_euler("xyz", [0.3, 1.0, -0.2]).as_matrix()
+    w = predicted_wrench(0.6, np.array([0.0, 0.01, 0.1]), R, STANDARD_GRAVITY_W)
+    assert (R @ w[3:])[2] == pytest.approx(0.6 * 9.81)
+    assert np.allclose(w[:3], np.cross([0.0, 0.01, 0.1], w[3:]))
