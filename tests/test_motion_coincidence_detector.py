@@ -4,13 +4,15 @@ Eq. (27) on real optical flow, the confirming request, per-feature flags, contex
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
-from test_optical_flow_tracker import build_scene_diagram
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from test_optical_flow_tracker import CAMERA, GRID_SHAPE, MovingScene, build_scene_diagram
 
 from sustain_drake.perception.coincidence import CoincidenceState
 from sustain_drake.systems.motion_coincidence_detector import (
     FeatureBodyFlags,
     MotionCoincidenceDetector,
 )
+from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 
 
 @pytest.fixture(scope="module")
@@ -90,3 +92,77 @@ def test_constructor_rejects_bad_sizes():
         MotionCoincidenceDetector(0, 10)
     with pytest.raises(ValueError, match="period"):
         MotionCoincidenceDetector(2, 10, period=0.0)
+
+
+class ScriptedArm(LeafSystem):
+    """A stand-in motion generator for one joint: alternates 0.5 s moves (±0.4 rad/s) and
+    0.6 s pauses, and answers the detector's confirming requests: back to q* in 0.2 s, hold
+    for the requested time, move again for 0.4 s. State: [q, v, phase, phase_end, count, q*]."""
+
+    MOVE, PAUSE, RETURN, HOLD = 0.0, 1.0, 2.0, 3.0
+
+    def __init__(self, period=1.0 / 30.0):
+        super().__init__()
+        self._period = period
+        self._request = self.DeclareVectorInputPort("confirm_request", 3)
+        self._posture = self.DeclareVectorInputPort("confirm_posture", 1)
+        self.DeclareDiscreteState(np.array([0.0, 0.0, self.PAUSE, 1.0, 0.0, 0.0, 0.0]))
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclareVectorOutputPort("position", 1, lambda c, o: o.SetFromVector(
+            c.get_discrete_state_vector().value()[:1]),
+            prerequisites_of_calc={self.all_state_ticket()})
+
+    def _update(self, context, discrete_state):
+        q, v, phase, end, count, q_star, n_moves = context.get_discrete_state_vector().value()
+        t = context.get_time()
+        request = self._request.Eval(context)
+        if request[0] > 0 and request[1] > count:
+            count, q_star = request[1], self._posture.Eval(context)[0]
+            phase, end, v = self.RETURN, t + 0.2, (q_star - q) / 0.2
+        elif t >= end - 1e-9:
+            if phase == self.RETURN:
+                q, v, phase, end = q_star, 0.0, self.HOLD, t + request[2]
+            elif phase in (self.HOLD, self.PAUSE):
+                n_moves += 1
+                # away from 0 when near it, back towards 0 otherwise, to stay in ±0.6 rad
+                direction = 1.0 if (n_moves % 2 == 1) == (q <= 0) else -1.0
+                v, phase, end = 0.4 * direction, self.MOVE, t + (0.4 if phase == self.HOLD else 0.5)
+            else:
+                v, phase, end = 0.0, self.PAUSE, t + 0.6
+        q = float(np.clip(q + v * self._period, -0.6, 0.6))
+        discrete_state.get_mutable_vector(0).SetFromVector(
+            [q, v, phase, end, count, q_star, n_moves])
+
+
+def test_closed_loop_confirming_motions_mark_arm_cells_and_never_the_distractor():
+    """Real optical flow on a synthetic scene, the detector, and a scripted arm answering its
+    requests; the distractor patch moves by itself for 0.3 s every ~1-2 s."""
+    rng = np.random.default_rng(1)
+    starts = np.cumsum(rng.uniform(1.0, 2.0, 12))
+    distractor = tuple((s, s + 0.3) for s in starts)
+    builder = DiagramBuilder()
+    arm = builder.AddNamedSystem("arm", ScriptedArm())
+    scene = builder.AddNamedSystem("scene", MovingScene(distractor=distractor))
+    tracker = builder.AddNamedSystem("tracker", OpticalFlowTracker(CAMERA, GRID_SHAPE))
+    detector = builder.AddNamedSystem(
+        "detector", MotionCoincidenceDetector(1, tracker.grid.num_cells))
+    builder.Connect(arm.GetOutputPort("position"), scene.get_input_port(0))
+    builder.Connect(scene.GetOutputPort("color_image"), tracker.GetInputPort("color_image"))
+    builder.Connect(scene.GetOutputPort("depth_image"), tracker.GetInputPort("depth_image"))
+    builder.Connect(arm.GetOutputPort("position"), detector.GetInputPort("actuator_positions"))
+    builder.Connect(tracker.GetOutputPort("visual_change"), detector.GetInputPort("visual_change"))
+    builder.Connect(detector.GetOutputPort("confirm_request"), arm.GetInputPort("confirm_request"))
+    builder.Connect(detector.GetOutputPort("confirm_posture"), arm.GetInputPort("confirm_posture"))
+    sim = Simulator(builder.Build())
+    ctx = detector.GetMyContextFromRoot(sim.get_context())
+    ever = np.zeros(tracker.grid.num_cells, bool)
+    for k in range(1, 12 * 30):
+        sim.AdvanceTo(k / 30.0)
+        ever |= detector.GetOutputPort("body_cells").Eval(ctx) > 0
+    cols = columns(tracker)
+    rows = np.arange(tracker.grid.num_cells) // tracker.grid.cols
+    arm_cells = cols <= 2
+    distractor_cells = (rows >= 2) & (rows <= 3) & (cols >= 5) & (cols <= 6)
+    assert detector.GetOutputPort("confirm_request").Eval(ctx)[1] >= 2
+    assert ever[arm_cells].mean() >= 0.8
+    assert not ever[cols >= 5].any() and not ever[distractor_cells].any()

@@ -174,3 +174,24 @@ def test_without_confirming_motions_nothing_is_body():
     state, _, masks, _ = run(SyntheticWorld(), 30.0, 0, honour_requests=False)
     assert not masks.any()
     assert state.eps.sum() > 0
+
+
+def test_chance_probability_uses_the_prior_rate_and_the_trial_window():
+    s = CoincidenceState(1, 1)
+    assert s.chance_probability(CoincidenceParams())[0] == pytest.approx(1 - np.exp(-0.5 * 0.3))
+    short = CoincidenceParams(response_window=0.1)
+    assert s.chance_probability(short)[0] == pytest.approx(1 - np.exp(-0.5 * 0.1))
+    with pytest.raises(ValueError, match="response_window"):
+        CoincidenceParams(response_window=0.5)
+
+
+def test_visual_onsets_while_the_robot_is_still_are_counter_evidence():
+    n = 300                                   # 10 s, the robot never moves
+    busy = np.zeros(n, bool)
+    for start in range(10, n, 60):            # onsets every 2 s
+        busy[start:start + 8] = True
+    states = drive(np.zeros((n, 1), bool), np.stack([busy, np.zeros(n, bool)], axis=1))
+    s, p = states[-1], CoincidenceParams()
+    assert s.unexplained[0] == pytest.approx(5, rel=0.2) and s.unexplained[1] == 0
+    assert s.still_evidence(p)[0] < -3 < 0 < s.still_evidence(p)[1]
+    assert s.chance_probability(p)[1] < 0.05 < s.chance_probability(p)[0]

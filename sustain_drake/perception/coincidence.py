@@ -20,39 +20,46 @@ Eq. (27), implemented by :func:`causal_and` and counted by :func:`step`::
   the encoder difference and the image pair span the same interval.
 - ``ε_ij`` increments once per coincident pair of onsets (the pair is remembered).
 
-**The body rule (ours; the paper leaves it at Σ_i ε_ij > 0).** Counting coincidences lets a busy
-distractor through: a cell with visual onsets at 0.5/s falls in a 300 ms window after an actuator
-onset ~14 % of the time. So ``ε`` is the paper's likelihood map, and a cell is marked *body* only
-after a sequential likelihood-ratio test between "the cell moves because of the robot" (responds
-to an actuator onset with probability ``p_response``) and "the cell moves by itself" (falls in the
-window by chance with probability ``p0_j``):
+**The body rule (ours; the paper marks a cell as soon as Σ_i ε_ij > 0).** Counting
+coincidences lets a busy distractor through: a cell with visual onsets at 0.5/s falls in a 300 ms
+window after an actuator onset ~14 % of the time. So ``ε`` stays the paper's likelihood map, and a
+cell is marked *body* only by a sequential likelihood-ratio test between "the cell moves because
+of the robot" (it responds to an actuator onset with probability ``p_response``) and "the cell
+moves by itself" (it falls in the window by chance with probability ``p0_j``). Its evidence is
+``L_j = C_j + S_j``:
 
-1. *Counter-evidence, visual onsets with no actuator onset before them.* While every actuator has
-   been still for ``τ_a`` (Eq. (26): no body motion ⇒ no body motion in view), a visual onset in
-   cell ``j`` cannot be the robot. These are counted (``unexplained_j``) with the still time
-   ``T_still,j`` during which the cell was quiet (both forgotten with time constant ``memory``);
-   the cell's spontaneous onset rate is
-   ``λ_j = (unexplained_j + prior_onsets) / (T_still,j + prior_time)`` and its chance-coincidence
-   probability ``p0_j = 1 - exp(-λ_j τ_s)``. A busy cell thus needs more evidence than a quiet one.
-   The Poisson log-likelihood ratio of these still-time onsets, body (rate ``body_onset_rate``)
-   against ``λ_j``, is added to ``L_j``: a cell that moves while the robot is still loses evidence.
-2. *Confirming motions (paper §3.3.2, §4.2).* When ``ε_ij`` increments for cells not yet body and
-   no confirmation is pending, the detector requests one: go back to the posture ``q*`` at the
-   actuator's onset, and move again. The coincidence that raised the request adds
-   ``ln(p_response / p0_j)`` to each candidate cell's evidence ``L_j``.
-3. *Trial.* The first actuator onset within ``posture_tolerance`` of ``q*`` after the request
-   starts a trial that lasts ``τ_a + τ_s``. A candidate cell that shows a coinciding visual onset
-   (Eq. (27) with an actuator onset of the trial) is a *hit*: ``L_j += ln(p_response / p0_j)``.
-   A candidate cell with no visual response although one of its candidate actuators moved again
-   is a *miss* (counter-evidence, *actuator onsets with no visual response*, only counted at the
-   same posture, where Eq. (26) says the body must respond): ``L_j += ln((1-p_response)/(1-p0_j))``.
-   A request with no trial within ``confirm_timeout`` expires without evidence.
-4. Cell ``j`` is **body** while ``L_j >= ln(1/alpha)``. ``L_j`` is floored at ``ln(beta)`` so a
-   cell that held a distractor can still become body later (the arm may move into it).
+1. *Counter-evidence: visual onsets with no actuator onset before them* (``S_j``). While every
+   actuator has been still for ``τ_a`` (Eq. (26): no body motion ⇒ no body motion in view), a
+   visual onset in cell ``j`` cannot be the robot. Such onsets ``u_j`` are counted with the still
+   time ``T_j`` during which the cell was quiet (both forgotten with time constant ``memory``).
+   The cell's spontaneous onset rate is ``λ_j = (u_j + prior_onsets) / (T_j + prior_time)``
+   (prior: 0.5/s, the busy distractor, until the cell has been watched), and
+   ``S_j = u_j ln(λ_b / λ_j) - (λ_b - λ_j) T_j``, the Poisson log-likelihood ratio of a body cell
+   (rate ``λ_b = body_onset_rate``, noise) against the cell's own rate: a cell that moves while
+   the robot is still loses evidence at once.
+2. *Confirming motions (paper §3.3.2, §4.2).* When ``ε_ij`` increments for a cell not yet body and
+   no request is pending, the detector requests one: go back to the posture ``q*`` at the onset of
+   the actuator motion, hold still (``hold_time``, varied per request so trials never phase-lock
+   with a periodic distractor such as a walking person), and move again. The coincidence that
+   raised the request is *not* evidence: it was selected because it coincided.
+3. *Trial* (``C_j``). The first actuator onset within ``posture_tolerance`` of ``q*`` after the
+   request starts a trial. A candidate cell whose visual onset coincides (Eq. (27)) with an
+   actuator onset of the trial, at most ``w = response_window`` (default ``τ_s``) after it, is a
+   *hit*: ``C_j += ln(p_response / p0_j)`` with ``p0_j = 1 - exp(-λ_j w)``. A candidate cell with
+   no visual response although one of its candidate actuators moved again is a *miss* -- the
+   counter-evidence *actuator onsets with no visual response*, counted only here, at the same
+   posture, where Eq. (26) says a body cell must respond: ``C_j += ln((1-p_response)/(1-p0_j))``.
+   The trial ends when every candidate has hit, or after ``τ_a + τ_s``. Cells that hit and are
+   not yet body are tested again at once at the same posture. A request with no trial within
+   ``confirm_timeout`` expires without evidence. ``C_j`` is floored at ``ln(beta)`` so that a cell
+   that held a distractor can still become body later (the arm may move into it).
+4. Cell ``j`` is **body** while ``L_j >= ln(1/alpha)``.
 
-With the defaults (``p_response`` = 0.9, ``alpha`` = 1e-3) a cell watched while still (p0 ≈ 0.03)
-becomes body after its first coincidence and one confirming hit; the issue's busy distractor
-(p0 ≈ 0.14 once its rate is measured) needs four hits more than its misses can take away.
+Under "the cell moves by itself" each trial's likelihood ratio has expectation 1, so a distractor
+cell is marked with probability about ``alpha`` (more if ``λ_j`` is underestimated). With the
+defaults (``p_response`` = 0.9, ``alpha`` = 1e-3, ``w`` = 0.3 s) a cell needs four confirming
+hits while its rate is the prior, two once it has been watched quiet (robot still) for ~10 s;
+the busy distractor (p0 ≈ 0.14) needs about four hits more than its misses take away.
 
 The state is a :class:`CoincidenceState` of plain numpy arrays with an exact flat-vector
 round trip (:meth:`CoincidenceState.to_vector`, :meth:`CoincidenceState.from_vector`), so a Drake
@@ -91,6 +98,9 @@ class CoincidenceParams:
     beta: float = 1e-2                 # L_j floored at ln(beta)
     posture_tolerance: float = 0.05    # rad, max-norm: a confirming trial starts near q*
     confirm_timeout: float = 5.0       # s: an unanswered confirming request expires
+    response_window: float | None = None  # s: a trial hit's visual onset must follow the
+    #                                    actuator onset within this; None: τ_s. A window as
+    #                                    short as the real sensor latency makes p0_j smaller.
 
     def __post_init__(self):
         positive = ("tau_a", "tau_s", "p_response", "prior_onsets", "prior_time", "alpha",
@@ -104,12 +114,20 @@ class CoincidenceParams:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if self.response_window is not None and not (
+                np.isfinite(self.response_window) and 0 < self.response_window <= self.tau_a):
+            raise ValueError(f"response_window must be in (0, tau_a], got {self.response_window}")
         if not (self.p_response < 1 and self.alpha < 1 and self.beta < 1):
             raise ValueError("p_response, alpha and beta must be below 1")
 
     @property
     def body_threshold(self) -> float:
         return float(np.log(1.0 / self.alpha))
+
+    @property
+    def trial_window(self) -> float:
+        """Window (s) within which a trial's visual onset must follow its actuator onset."""
+        return self.tau_s if self.response_window is None else self.response_window
 
     @property
     def evidence_floor(self) -> float:
@@ -218,7 +236,7 @@ class CoincidenceState:
 
     def chance_probability(self, params: CoincidenceParams) -> np.ndarray:
         """``p0_j``: probability that cell j's own onsets fall in a τ_s window by chance."""
-        return -np.expm1(-self.spontaneous_rate(params) * params.tau_s)
+        return -np.expm1(-self.spontaneous_rate(params) * params.trial_window)
 
     def hold_time(self, params: CoincidenceParams) -> float:
         """Requested hold at q* (s), varied per request by a golden-ratio sequence so the
@@ -340,7 +358,8 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
     if s.trial_active:
         cand = s.candidates > 0
         s.trial_moved = np.maximum(s.trial_moved, onset_a)
-        trial_new = new & (s.t_onset_a >= s.trial_t0)[:, None]
+        trial_new = new & ((s.t_onset_a >= s.trial_t0)
+                           & (t - s.t_onset_a <= params.trial_window + 1e-9))[:, None]
         # A hit is scored at once (detection latency); a miss only when the window has closed.
         first_hit = cand & trial_new.any(axis=0) & ~(s.trial_hit.max(axis=0) > 0)
         _add_evidence(s, first_hit, True, params)
