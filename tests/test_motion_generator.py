@@ -89,13 +89,30 @@ def test_pause_holds_the_posture_for_its_duration():
 def test_confirm_goes_back_to_the_posture_then_moves_again():
     target = np.array([0.4, 0.7, 0.6])
     gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5, min_duration=0.5)
-    times, x = run(gen, 6.0, confirm=np.concatenate([[1.0], target]))
+    times, x = run(gen, 6.0, confirm=np.concatenate([[1.0, -1.0], target]))
     q = x[:, :3]
     reached = np.linalg.norm(q - target, axis=1) < 1e-6
     assert reached.any()
     first = np.argmax(reached)
     assert times[first] < 3.0
     assert np.linalg.norm(q[-1] - target) > 0.05  # and it moved on (only once: edge-trigger)
+
+
+@pytest.mark.parametrize("joint", [0, 1, 2])
+def test_confirm_with_a_joint_moves_only_that_joint_after_returning(joint):
+    target = np.array([0.4, 0.7, 0.6])
+    gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5, min_duration=0.5)
+    _, x = run(gen, 10.0, confirm=np.concatenate([[1.0, joint], target]))
+    q = x[:, :3]
+    first = np.argmax(np.linalg.norm(q - target, axis=1) < 1e-6)
+    assert np.linalg.norm(q[first] - target) < 1e-6
+    after = q[first:]
+    others = [i for i in range(3) if i != joint]
+    # The other joints stay at the target during the confirming move, then babbling resumes.
+    others_moved = np.max(np.abs(after[:, others] - target[others]), axis=1) > 1e-9
+    assert others_moved.any()
+    confirming = after[:np.argmax(others_moved), joint]
+    assert np.max(np.abs(confirming - target[joint])) >= 0.3 * (UPPER[joint] - LOWER[joint])
 
 
 @pytest.mark.parametrize("args", [

@@ -6,9 +6,12 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 # Layout of the discrete state vector (n = number of joints); see MotionGenerator.
-_T0, _DURATION, _SEGMENT, _KIND, _PAUSE_ID, _CONFIRM_ID = range(6)
-_HEADER = 6
-_MOVE, _HOLD = 0.0, 1.0
+_T0, _DURATION, _SEGMENT, _KIND, _PAUSE_ID, _CONFIRM_ID, _CONFIRM_JOINT = range(7)
+_HEADER = 7
+# Segment kinds: a babbling move, a rest, the move back to a posture to confirm.
+_MOVE, _HOLD, _RETURN = 0.0, 1.0, 2.0
+# A confirming single-joint move covers at least this fraction of the joint's range.
+_CONFIRM_MIN_FRACTION = 0.3
 
 
 def quintic(q0: np.ndarray, q1: np.ndarray, duration: float, s: float):
@@ -49,9 +52,11 @@ class MotionGenerator(LeafSystem):
 
     - ``pause`` = ``[request_id, duration]``: when ``request_id`` changes, hold the current
       desired posture for ``duration`` s, then continue babbling.
-    - ``confirm`` = ``[request_id, q_1, ..., q_n]``: when ``request_id`` changes, go back to
-      the posture ``q`` (at the pace) and then move again from there (the paper's confirming
-      motion after a coincidence).
+    - ``confirm`` = ``[request_id, joint, q_1, ..., q_n]``: when ``request_id`` changes, go
+      back to the posture ``q`` (at the pace) and then move again from there: only joint
+      ``joint`` (0-based, by at least 30 % of its range) when ``joint >= 0``, so the visual
+      change can be attributed to that joint, or a usual random move when ``joint < 0`` (the
+      paper's confirming motion after a coincidence).
 
     Ids start at 0, so the first request uses 1. Unconnected inputs are ignored. The state is
     a discrete vector (segment start time and duration, segment index and kind, last request
@@ -91,7 +96,7 @@ class MotionGenerator(LeafSystem):
         x0[_HEADER + n:] = goal
         self._state = self.DeclareDiscreteState(x0)
         self._pause = self.DeclareVectorInputPort("pause", 2)
-        self._confirm = self.DeclareVectorInputPort("confirm", 1 + n)
+        self._confirm = self.DeclareVectorInputPort("confirm", 2 + n)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort("desired_state", BasicVector(2 * n), self._calc_desired,
                                      {self.time_ticket(), self.xd_ticket()})
@@ -102,6 +107,15 @@ class MotionGenerator(LeafSystem):
     def _goal(self, k: int) -> np.ndarray:
         rng = np.random.default_rng([self._seed, k])
         return rng.uniform(self._lower, self._upper)
+
+    def _single_joint_goal(self, q: np.ndarray, j: int, random_goal: np.ndarray) -> np.ndarray:
+        """``q`` with only joint j moved to a random value, far enough to be seen."""
+        goal = q.copy()
+        lo, hi = self._lower[j], self._upper[j]
+        goal[j] = random_goal[j]
+        if abs(goal[j] - q[j]) < _CONFIRM_MIN_FRACTION * (hi - lo):
+            goal[j] = hi if hi - q[j] >= q[j] - lo else lo  # the farther end
+        return goal
 
     def _move_duration(self, q0: np.ndarray, q1: np.ndarray) -> float:
         return max(self._min_duration,
@@ -130,8 +144,10 @@ class MotionGenerator(LeafSystem):
             request = self._confirm.Eval(context)
             if np.all(np.isfinite(request)) and request[0] != x[_CONFIRM_ID]:
                 x[_CONFIRM_ID] = request[0]
-                target = np.clip(request[1:], self._lower, self._upper)
-                self._start(x, t, q_now, target, self._move_duration(q_now, target), _MOVE)
+                joint = int(request[1]) if 0 <= request[1] < self._n else -1
+                x[_CONFIRM_JOINT] = joint
+                target = np.clip(request[2:], self._lower, self._upper)
+                self._start(x, t, q_now, target, self._move_duration(q_now, target), _RETURN)
                 discrete_state.set_value(self._state, x)
                 return
         if self._pause.HasValue(context):
@@ -143,10 +159,14 @@ class MotionGenerator(LeafSystem):
                 return
         if t < x[_T0] + x[_DURATION]:
             return
+        k = int(x[_SEGMENT])
         if x[_KIND] == _MOVE and self._dwell > 0:
             self._start(x, t, q_now, q_now, self._dwell, _HOLD)
+        elif x[_KIND] == _RETURN and x[_CONFIRM_JOINT] >= 0:
+            goal = self._single_joint_goal(q_now, int(x[_CONFIRM_JOINT]), self._goal(k))
+            x[_SEGMENT] = k + 1
+            self._start(x, t, q_now, goal, self._move_duration(q_now, goal), _MOVE)
         else:
-            k = int(x[_SEGMENT])
             goal = self._goal(k)
             x[_SEGMENT] = k + 1
             self._start(x, t, q_now, goal, self._move_duration(q_now, goal), _MOVE)
