@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from pydrake.common.value import AbstractValue
 from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification.payload import STANDARD_GRAVITY_W
@@ -75,3 +76,53 @@ def test_predicted_wrench_matches_the_payload_convention():
     w = predicted_wrench(0.6, np.array([0.0, 0.01, 0.1]), R, STANDARD_GRAVITY_W)
     assert (R @ w[3:])[2] == pytest.approx(0.6 * 9.81)
     assert np.allclose(w[:3], np.cross([0.0, 0.01, 0.1], w[3:]))
+
+
+def test_touch_estimator_system_on_a_synthetic_wrench():
+    from pydrake.geometry import Box as DrakeBox
+    from pydrake.math import RigidTransform, RollPitchYaw
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
+
+    from sustain_drake.identification.payload import PayloadIdentifier
+    from sustain_drake.systems.touch_estimator import TouchEstimator
+
+    mass, p_KCm = 0.6, np.array([0.0, 0.0, 0.12])
+    # A payload solution identified from exact data.
+    ident = PayloadIdentifier()
+    for R in Rotation.random(20, random_state=1).as_matrix():
+        ident.add(predicted_wrench(mass, p_KCm, R, STANDARD_GRAVITY_W), R)
+    solution = ident.solve()
+    assert solution.verdict.converged
+    X_WK = RigidTransform(RollPitchYaw(0.3, -0.4, 1.0), [0.4, 0.1, 0.5])
+    R_WK = X_WK.rotation().matrix()
+    X_KG = RigidTransform([0.0, 0.0, 0.12])
+    p_KP = np.array([0.03, -0.02, 0.12 + 0.05])  # on the box's +z face (box 0.1 x 0.08 x 0.1)
+    F_env_K = R_WK.T @ np.array([0.5, 0.0, 6.0])
+    F_env_K = F_env_K if F_env_K[2] < 0 else -F_env_K  # pushing into the +z face
+    reading = predicted_wrench(mass, p_KCm, R_WK, STANDARD_GRAVITY_W) + residual_for(p_KP, F_env_K)
+
+    def run(wrench):
+        builder = DiagramBuilder()
+        est = builder.AddSystem(TouchEstimator(DrakeBox(0.1, 0.08, 0.1), X_KG))
+        for port, source in (
+            ("wrench", ConstantVectorSource(wrench)),
+            ("X_WK", ConstantValueSource(AbstractValue.Make(X_WK))),
+            ("payload", ConstantValueSource(AbstractValue.Make(solution))),
+            ("allowable_error", ConstantVectorSource([100 * max(solution.expected_mse, 1e-8)])),
+        ):
+            builder.Connect(builder.AddSystem(source).get_output_port(), est.GetInputPort(port))
+        diagram = builder.Build()
+        ctx = est.GetMyContextFromRoot(diagram.CreateDefaultContext())
+        return {n: est.GetOutputPort(n).Eval(ctx) for n in ("touch", "p_KP", "p_WP", "f_env_W")}
+
+    out = run(reading)
+    assert out["touch"][0] == 1.0
+    assert np.linalg.norm(out["p_KP"] - p_KP) < 1e-6
+    assert np.linalg.norm(out["p_WP"] - X_WK.multiply(p_KP)) < 1e-6
+    assert np.allclose(out["f_env_W"], R_WK @ F_env_K)
+    # Free motion: the reading is the payload's own wrench (plus sensor noise): no touch.
+    rng = np.random.default_rng(0)
+    noise = np.concatenate([rng.normal(0, 5e-4, 3), rng.normal(0, 0.02, 3)])
+    quiet = run(predicted_wrench(mass, p_KCm, R_WK, STANDARD_GRAVITY_W) + noise)
+    assert quiet["touch"][0] == 0.0 and not quiet["p_KP"].any()
