@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource
+from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
 
 from sustain_drake.systems.motion_generator import MotionGenerator, quintic
 
@@ -15,15 +16,21 @@ UPPER = np.array([0.5, 0.8, 1.5])
 START = np.array([0.0, 0.4, 1.0])
 
 
+def _source(value):
+    """A constant request, or a ``(times, values)`` one that changes at the given times."""
+    if isinstance(value, tuple):
+        times, values = value
+        return TrajectorySource(PiecewisePolynomial.ZeroOrderHold(times, np.array(values).T))
+    return ConstantVectorSource(value)
+
+
 def run(generator: MotionGenerator, duration: float, dt: float = 0.01, pause=None, confirm=None):
     builder = DiagramBuilder()
     builder.AddSystem(generator)
-    if pause is not None:
-        source = builder.AddSystem(ConstantVectorSource(pause))
-        builder.Connect(source.get_output_port(), generator.GetInputPort("pause"))
-    if confirm is not None:
-        source = builder.AddSystem(ConstantVectorSource(confirm))
-        builder.Connect(source.get_output_port(), generator.GetInputPort("confirm"))
+    for name, value in (("pause", pause), ("confirm", confirm)):
+        if value is not None:
+            source = builder.AddSystem(_source(value))
+            builder.Connect(source.get_output_port(), generator.GetInputPort(name))
     diagram = builder.Build()
     simulator = Simulator(diagram)
     context = generator.GetMyContextFromRoot(simulator.get_context())
@@ -84,6 +91,22 @@ def test_pause_holds_the_posture_for_its_duration():
     assert np.max(np.abs(q[held] - q[held][0])) < 1e-12
     assert np.max(np.abs(x[held, 3:])) == 0.0
     assert np.max(np.abs(q[times > 2.5] - q[held][0])) > 1e-3
+
+
+def test_a_pause_during_a_move_brakes_smoothly_then_holds():
+    gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5, min_duration=0.5)
+    # Request 1 (a 1 s pause) arrives at t = 0.6 s, in the middle of the first move.
+    pause = ([0.0, 0.6, 100.0], [[0.0, 0.0], [1.0, 1.0], [1.0, 1.0]])
+    times, x = run(gen, 3.0, dt=0.005, pause=pause)
+    v = x[:, 3:]
+    i = np.searchsorted(times, 0.6)
+    assert np.max(np.abs(v[i])) > 0.1  # it was moving
+    # The desired velocity has no jump and decelerates at no more than 3 rad/s^2.
+    assert np.max(np.abs(np.diff(v, axis=0))) / 0.005 <= 3.0 * 1.05 + 1.0
+    stopped = times[i + np.argmax(np.max(np.abs(v[i:]), axis=1) < 1e-12)]
+    assert 0.6 < stopped < 0.6 + 0.35
+    held = (times > stopped + 0.01) & (times < stopped + 0.99)
+    assert np.max(np.abs(x[held, :3] - x[held][0, :3])) < 1e-12
 
 
 def test_confirm_goes_back_to_the_posture_then_moves_again():

@@ -6,23 +6,30 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 # Layout of the discrete state vector (n = number of joints); see MotionGenerator.
-_T0, _DURATION, _SEGMENT, _KIND, _PAUSE_ID, _CONFIRM_ID, _CONFIRM_JOINT = range(7)
-_HEADER = 7
-# Segment kinds: a babbling move, a rest, the move back to a posture to confirm.
-_MOVE, _HOLD, _RETURN = 0.0, 1.0, 2.0
+(_T0, _DURATION, _SEGMENT, _KIND, _PAUSE_ID, _CONFIRM_ID, _CONFIRM_JOINT,
+ _PAUSE_LEFT) = range(8)
+_HEADER = 8
+# Segment kinds: a babbling move, a rest, the move back to a posture to confirm, braking.
+_MOVE, _HOLD, _RETURN, _BRAKE = 0.0, 1.0, 2.0, 3.0
+# Peak deceleration when a pause interrupts a move, rad/s^2.
+_BRAKE_ACCELERATION = 3.0
 # A confirming single-joint move covers at least this fraction of the joint's range.
 _CONFIRM_MIN_FRACTION = 0.3
 
 
-def quintic(q0: np.ndarray, q1: np.ndarray, duration: float, s: float):
-    """Minimum-jerk interpolation from ``q0`` to ``q1``: position and velocity at time ``s``
-    into the move (zero velocity and acceleration at both ends, so moves chain smoothly)."""
+def quintic(q0: np.ndarray, q1: np.ndarray, duration: float, s: float, v0=None):
+    """Minimum-jerk-like interpolation from ``q0`` (with velocity ``v0``, default 0) to ``q1``
+    (at rest): position and velocity at time ``s`` into the move. Acceleration is zero at both
+    ends and velocity continuous, so moves chain smoothly and requests never jerk the arm."""
     if duration <= 0:
         return q1.copy(), np.zeros_like(q1)
     x = min(max(s / duration, 0.0), 1.0)
-    blend = x**3 * (10 - 15 * x + 6 * x**2)
-    rate = 30 * x**2 * (1 - x) ** 2 / duration
-    return q0 + (q1 - q0) * blend, (q1 - q0) * rate
+    delta = q1 - q0
+    V = np.zeros_like(q0) if v0 is None else np.asarray(v0) * duration
+    c3, c4, c5 = 10 * delta - 6 * V, -15 * delta + 8 * V, 6 * delta - 3 * V
+    q = q0 + V * x + c3 * x**3 + c4 * x**4 + c5 * x**5
+    v = (V + 3 * c3 * x**2 + 4 * c4 * x**3 + 5 * c5 * x**4) / duration
+    return q, v
 
 
 # The peak speed of a quintic move is 15/8 of its mean speed.
@@ -50,17 +57,20 @@ class MotionGenerator(LeafSystem):
 
     Requests are edge-triggered by an id, so holding a value does not repeat the request:
 
-    - ``pause`` = ``[request_id, duration]``: when ``request_id`` changes, hold the current
-      desired posture for ``duration`` s, then continue babbling.
+    - ``pause`` = ``[request_id, duration]``: when ``request_id`` changes, brake smoothly
+      (peak deceleration 3 rad/s^2, so within about 0.3 s at the default pace), hold still for
+      ``duration`` s, then continue babbling.
     - ``confirm`` = ``[request_id, joint, q_1, ..., q_n]``: when ``request_id`` changes, go
       back to the posture ``q`` (at the pace) and then move again from there: only joint
       ``joint`` (0-based, by at least 30 % of its range) when ``joint >= 0``, so the visual
       change can be attributed to that joint, or a usual random move when ``joint < 0`` (the
       paper's confirming motion after a coincidence).
 
-    Ids start at 0, so the first request uses 1. Unconnected inputs are ignored. The state is
-    a discrete vector (segment start time and duration, segment index and kind, last request
-    ids, segment start and goal postures), updated every ``period`` s.
+    Every segment starts from the current desired position and velocity, so requests never
+    make the desired state jump. Ids start at 0, so the first request uses 1. Unconnected
+    inputs are ignored. The state is a discrete vector (segment start time, duration, index
+    and kind, last request ids, pause time left, segment start posture, goal and start
+    velocity), updated every ``period`` s.
     """
 
     def __init__(self, lower, upper, initial_posture, seed: int = 0, max_speed: float = 0.5,
@@ -79,13 +89,14 @@ class MotionGenerator(LeafSystem):
             raise ValueError("max_speed, min_duration, period must be > 0 and dwell >= 0")
         self._n = n
         self._seed = int(seed)
+        self._period = float(period)
         self._max_speed = float(max_speed)
         self._min_duration = float(min_duration)
         self._dwell = float(dwell)
         q_init = np.clip(q_init, self._lower, self._upper)
 
         # Start with a first move from the initial posture (segment 0 -> goal 0).
-        x0 = np.zeros(_HEADER + 2 * n)
+        x0 = np.zeros(_HEADER + 3 * n)
         goal = self._goal(0)
         x0[_DURATION] = self._move_duration(q_init, goal)
         x0[_SEGMENT] = 1
@@ -93,7 +104,7 @@ class MotionGenerator(LeafSystem):
         # Request ids start at 0: the first request must use another id (1, 2, ...).
         x0[_PAUSE_ID] = x0[_CONFIRM_ID] = 0.0
         x0[_HEADER:_HEADER + n] = q_init
-        x0[_HEADER + n:] = goal
+        x0[_HEADER + n:_HEADER + 2 * n] = goal
         self._state = self.DeclareDiscreteState(x0)
         self._pause = self.DeclareVectorInputPort("pause", 2)
         self._confirm = self.DeclareVectorInputPort("confirm", 2 + n)
@@ -122,24 +133,34 @@ class MotionGenerator(LeafSystem):
                    _PEAK_OVER_MEAN * float(np.max(np.abs(q1 - q0))) / self._max_speed)
 
     def _desired(self, x: np.ndarray, t: float):
-        n = self._n
-        return quintic(x[_HEADER:_HEADER + n], x[_HEADER + n:], x[_DURATION], t - x[_T0])
+        n, h = self._n, _HEADER
+        return quintic(x[h:h + n], x[h + n:h + 2 * n], x[_DURATION], t - x[_T0],
+                       x[h + 2 * n:])
 
     def _calc_desired(self, context, output) -> None:
         x = context.get_discrete_state(self._state).get_value()
         q, v = self._desired(x, context.get_time())
         output.SetFromVector(np.concatenate([q, v]))
 
-    def _start(self, x: np.ndarray, t: float, q0, q1, duration: float, kind: float) -> None:
-        n = self._n
+    def _start(self, x: np.ndarray, t: float, q0, q1, duration: float, kind: float,
+               v0=None) -> None:
+        n, h = self._n, _HEADER
         x[_T0], x[_DURATION], x[_KIND] = t, duration, kind
-        x[_HEADER:_HEADER + n] = q0
-        x[_HEADER + n:] = q1
+        x[h:h + n] = q0
+        x[h + n:h + 2 * n] = q1
+        x[h + 2 * n:] = 0.0 if v0 is None else v0
+
+    def _brake(self, x: np.ndarray, t: float, q, v) -> None:
+        """Stop smoothly from (q, v): the quintic from v to rest with goal q + v T / 2 has a
+        monotone speed and peak deceleration 1.5 |v| / T."""
+        duration = max(self._period, 1.5 * float(np.max(np.abs(v))) / _BRAKE_ACCELERATION)
+        stop = np.clip(q + v * duration / 2, self._lower, self._upper)
+        self._start(x, t, q, stop, duration, _BRAKE, v)
 
     def _update(self, context, discrete_state) -> None:
         x = context.get_discrete_state(self._state).get_value().copy()
         t = context.get_time()
-        q_now, _ = self._desired(x, t)
+        q_now, v_now = self._desired(x, t)
         if self._confirm.HasValue(context):
             request = self._confirm.Eval(context)
             if np.all(np.isfinite(request)) and request[0] != x[_CONFIRM_ID]:
@@ -147,20 +168,24 @@ class MotionGenerator(LeafSystem):
                 joint = int(request[1]) if 0 <= request[1] < self._n else -1
                 x[_CONFIRM_JOINT] = joint
                 target = np.clip(request[2:], self._lower, self._upper)
-                self._start(x, t, q_now, target, self._move_duration(q_now, target), _RETURN)
+                self._start(x, t, q_now, target, self._move_duration(q_now, target), _RETURN,
+                            v_now)
                 discrete_state.set_value(self._state, x)
                 return
         if self._pause.HasValue(context):
             request = self._pause.Eval(context)
             if np.all(np.isfinite(request)) and request[0] != x[_PAUSE_ID]:
                 x[_PAUSE_ID] = request[0]
-                self._start(x, t, q_now, q_now, max(float(request[1]), 0.0), _HOLD)
+                x[_PAUSE_LEFT] = max(float(request[1]), 0.0)
+                self._brake(x, t, q_now, v_now)
                 discrete_state.set_value(self._state, x)
                 return
         if t < x[_T0] + x[_DURATION]:
             return
         k = int(x[_SEGMENT])
-        if x[_KIND] == _MOVE and self._dwell > 0:
+        if x[_KIND] == _BRAKE:
+            self._start(x, t, q_now, q_now, x[_PAUSE_LEFT], _HOLD)
+        elif x[_KIND] == _MOVE and self._dwell > 0:
             self._start(x, t, q_now, q_now, self._dwell, _HOLD)
         elif x[_KIND] == _RETURN and x[_CONFIRM_JOINT] >= 0:
             goal = self._single_joint_goal(q_now, int(x[_CONFIRM_JOINT]), self._goal(k))
