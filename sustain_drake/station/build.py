@@ -41,8 +41,10 @@ from sustain_drake.systems.ground_truth import GroundTruth, PointMass
 from sustain_drake.systems.motion_generator import MotionGenerator
 from sustain_drake.systems.wrench_sensor import GripperCompensation, WristWrenchSensor
 
-# Where the fixed furniture stands (world frame: origin at the arm's foot on the table top).
+# Where the fixed furniture stands (world frame: origin on the table top, under the arm; the
+# arm stands on the table's 0.25 m pedestal).
 X_W_TABLE = RigidTransform([0.25, 0.0, 0.0])
+X_W_ARM = RigidTransform([0.0, 0.0, 0.25])
 TOOL_FILES = {"rod": "rod_tool.sdf", "box": "box_tool.sdf"}
 # The grip is two stiff PD joints (slide along the grasp z, pivot about the closing axis x):
 # a tool slip is a fast move of these joints to new set points.
@@ -123,7 +125,7 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
     arm = parser.AddModels(model_file("arm.sdf"))[0]
     head = parser.AddModels(model_file("head.sdf"))[0]
     table = parser.AddModels(model_file("table.sdf"))[0]
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("arm_base", arm))
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("arm_base", arm), X_W_ARM)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table), X_W_TABLE)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("head_post", head),
                      scenario.head.X_WP.GetDeterministicValue())

@@ -59,7 +59,7 @@ class HeadConfig:
     X_WP: Transform = field(default_factory=lambda: Transform(
         RigidTransform(RollPitchYaw(0.0, 0.0, math.pi), [1.4, 0.0, 0.0])))
     pan: float = 0.0
-    tilt: float = 0.3
+    tilt: float = 0.1
 
 
 @dataclasses.dataclass
@@ -149,7 +149,7 @@ class HeadMove:
 
     time: float = 0.0
     pan: float = 0.0
-    tilt: float = 0.3
+    tilt: float = 0.1
     duration: float = 0.5
 
 
