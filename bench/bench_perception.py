@@ -1,6 +1,7 @@
 """Per-frame cost of body detection at 640 x 480 (issue 4: tracker + detector <= 6 ms together).
 
 Run:  .venv/bin/python bench/bench_perception.py [--frames 300] [--threads 1]
+          [--rule-seeds 100 [--response-window 0.1]]
 
 A textured 640 x 480 scene with a moving "arm" region and a moving "distractor" region,
 6 actuators, a 12 x 16 grid. Times (medians per frame, ms), all in one run so they compare on a
@@ -32,12 +33,17 @@ from pydrake.systems.analysis import Simulator  # noqa: E402
 from pydrake.systems.framework import DiagramBuilder, LeafSystem  # noqa: E402
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U  # noqa: E402
 
-from sustain_drake.perception.coincidence import CoincidenceState, step  # noqa: E402
+from sustain_drake.perception.coincidence import (  # noqa: E402
+    CoincidenceParams,
+    CoincidenceState,
+    step,
+)
 from sustain_drake.perception.optical_flow import (  # noqa: E402
     TrackerParams,
     TrackerState,
     track_frame,
 )
+from sustain_drake.perception.synthetic import SyntheticWorld, run  # noqa: E402
 from sustain_drake.systems.motion_coincidence_detector import (  # noqa: E402
     MotionCoincidenceDetector,
 )
@@ -151,11 +157,36 @@ def time_diagram(frames, joints, depth, camera):
     return {"diagram_ms": statistics.median(per_frame[5:])}
 
 
+def rule_statistics(seeds: int, params: CoincidenceParams) -> dict:
+    """The body rule on the synthetic world (``perception.synthetic``): 60 s episodes, 8 busy
+    distractor cells (onsets ~0.5/s) and 5 body cells; distractor cells ever marked, and the
+    latency from a body cell's first visual motion to its marking."""
+    world = SyntheticWorld()
+    marked, latencies, missed = 0, [], 0
+    for seed in range(seeds):
+        _, t, masks, sdot = run(world, 60.0, seed, params=params)
+        marked += int(masks.any(axis=0)[list(world.distractor_cells)].sum())
+        for j in world.body_drivers:
+            if masks[:, j].any():
+                latencies.append(t[np.argmax(masks[:, j])] - t[np.argmax(sdot[:, j] > 0)])
+            else:
+                missed += 1
+    return {"rule_episodes": seeds, "rule_distractor_cell_episodes":
+            seeds * len(world.distractor_cells), "rule_distractor_cells_marked": marked,
+            "rule_body_cells_missed": missed,
+            "rule_latency_median_s": float(np.median(latencies)),
+            "rule_latency_p90_s": float(np.percentile(latencies, 90))}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--frames", type=int, default=300)
     parser.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1)")
     parser.add_argument("--json", help="also write the results to this file")
+    parser.add_argument("--rule-seeds", type=int, default=0,
+                        help="also run the body rule on this many synthetic 60 s episodes")
+    parser.add_argument("--response-window", type=float, default=None,
+                        help="CoincidenceParams.response_window for --rule-seeds (s)")
     args = parser.parse_args()
     cv2.setNumThreads(args.threads)
     camera = CameraInfo(W, H, np.pi / 3)
@@ -176,6 +207,9 @@ def main() -> None:
     result["full_seed_frame_ms"] = statistics.median(seed_ms)
     result.update(time_diagram(frames, joints, depth, camera))
     result["cores_total_ms"] = result["tracker_ms"] + result["detector_ms"]
+    if args.rule_seeds > 0:
+        result.update(rule_statistics(
+            args.rule_seeds, CoincidenceParams(response_window=args.response_window)))
     for key, value in result.items():
         print(f"{key:>22}: {value:.3f}" if isinstance(value, float) else f"{key:>22}: {value}")
     print(f"target <= 6 ms per frame (tracker + detector): "
