@@ -3,6 +3,8 @@ long synthetic run with a busy self-moving distractor."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sustain_drake.perception.coincidence import (
     NEVER,
@@ -18,7 +20,7 @@ from sustain_drake.perception.synthetic import SyntheticWorld, run
 DT = 1.0 / 30.0
 
 
-def drive(actuator_moving, visual_moving):
+def drive(actuator_moving, visual_moving, params=None):
     """Run the detector on boolean per-sample signals (T x n_a, T x n_c); returns the states."""
     a_mov = np.atleast_2d(np.asarray(actuator_moving, float))
     s_mov = np.atleast_2d(np.asarray(visual_moving, float))
@@ -27,7 +29,8 @@ def drive(actuator_moving, visual_moving):
     states = []
     for k in range(a_mov.shape[0]):
         q = q + 0.5 * DT * a_mov[k]           # 0.5 rad/s while moving
-        state = step(state, (k + 1) * DT, q, 50.0 * s_mov[k])
+        state = step(state, (k + 1) * DT, q, 50.0 * s_mov[k],
+                     CoincidenceParams() if params is None else params)
         states.append(state)
     return states
 
@@ -195,3 +198,25 @@ def test_visual_onsets_while_the_robot_is_still_are_counter_evidence():
     assert s.unexplained[0] == pytest.approx(5, rel=0.2) and s.unexplained[1] == 0
     assert s.still_evidence(p)[0] < -3 < 0 < s.still_evidence(p)[1]
     assert s.chance_probability(p)[1] < 0.05 < s.chance_probability(p)[0]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.booleans(), st.booleans()), min_size=2, max_size=90))
+def test_eq27_count_matches_a_brute_force_reference(samples):
+    """ε_ij equals the number of visual onsets whose latest actuator onset is at most τ earlier
+    (onset: moving now, not at the previous sample; τ_a = τ_s)."""
+    act = np.array([False] + [a for a, _, _ in samples])
+    vis = np.array([[False, False]] + [[v, w] for _, v, w in samples])
+    params = CoincidenceParams(tau_a=0.31, tau_s=0.31, quiet_a=0.05, quiet_s=0.05)
+    eps = drive(act[:, None], vis, params)[-1].eps[0]
+
+    def onsets(x):
+        return [k for k in range(1, x.size) if x[k] and not x[k - 1]]
+
+    a_on = onsets(act)
+    for j in range(2):
+        expected = 0
+        for k in onsets(vis[:, j]):
+            earlier = [m for m in a_on if m <= k]
+            expected += bool(earlier) and (k - earlier[-1]) * DT <= 0.31
+        assert eps[j] == expected
