@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.geometry import (
+    LightParameter,
     MakeRenderEngineVtk,
     Meshcat,
     MeshcatVisualizer,
@@ -51,6 +52,14 @@ TOOL_FILES = {"rod": "rod_tool.sdf", "box": "box_tool.sdf"}
 GRIP_GAINS = {"tool_slide": PdControllerGains(p=2.0e4, d=200.0),
               "tool_pivot": PdControllerGains(p=500.0, d=5.0)}
 SENSOR_JOINT = "ft_sensor"
+# A ceiling light and a dimmer light at the camera: the table and the person's sides are not
+# black (VTK's default is a single headlight).
+ROOM_LIGHTS = [
+    LightParameter(type="directional", frame="world", direction=[0.3, 0.2, -1.0],
+                   intensity=0.8),
+    LightParameter(type="directional", frame="camera", direction=[0.0, 0.0, 1.0],
+                   intensity=0.5),
+]
 HAND_BODY = "gripper"
 
 EXPORTED_OUTPUTS = (
@@ -277,8 +286,8 @@ def _add_camera(builder, plant, scene_graph, scenario: Scenario, body, X_BS) -> 
     cam = scenario.camera
     if not scene_graph.HasRenderer(cam.renderer_name):
         rgba = cam.background
-        scene_graph.AddRenderer(cam.renderer_name, MakeRenderEngineVtk(
-            RenderEngineVtkParams(default_clear_color=[rgba.r(), rgba.g(), rgba.b()])))
+        scene_graph.AddRenderer(cam.renderer_name, MakeRenderEngineVtk(RenderEngineVtkParams(
+            default_clear_color=[rgba.r(), rgba.g(), rgba.b()], lights=ROOM_LIGHTS)))
     color_camera, depth_camera = cam.MakeCameras()
     sensor = builder.AddSystem(RgbdSensor(
         plant.GetBodyFrameIdOrThrow(body.index()), X_BS, color_camera, depth_camera))
