@@ -88,3 +88,27 @@ def test_likelihood_picture_marks_body_red_and_motion_blue(tmp_path):
     save_likelihood_png(path, image, GRID, eps, body, sdot)
     back = cv2.imread(str(path))
     assert back.shape == (40, 80, 3) and back[10, 10, 2] > 200      # BGR on disk
+
+
+def test_episode_evaluator_streams_frames_into_the_metrics():
+    from sustain_drake.perception.evaluation import EpisodeEvaluator
+
+    ev = EpisodeEvaluator(GRID, body_labels=(ARM, TOOL), distractor_labels=(PERSON,))
+    lab = labels()
+    sdot = np.zeros(8)
+    for k in range(4):
+        marked = np.zeros(8)
+        if k == 0:
+            sdot[0] = 5.0                       # the arm's cell moves visibly at t = 0
+        if k >= 2:
+            marked[[0, 7]] = 1                  # detected at t = 1.0, and the distractor too
+        ev.update(0.5 * k, lab, marked, sdot)
+    m = ev.metrics()
+    assert m["frames"] == 4 and m["body_cells_true"] == 2 and m["body_cells_marked"] == 2
+    assert m["precision"] == 0.5 and m["recall"] == 0.5
+    assert m["distractor_cells"] == 1 and m["distractor_cells_marked"] == 1
+    assert m["latency_median_s"] == 1.0 and m["latency_cells"] == 1
+    with pytest.raises(ValueError, match="expected 8 cells"):
+        ev.update(3.0, lab, np.zeros(3), sdot)
+    with pytest.raises(ValueError, match="no frames"):
+        EpisodeEvaluator(GRID, (ARM,)).metrics()

@@ -8,6 +8,8 @@
 - :func:`mask_metrics`: precision, recall and IoU of a predicted body mask on that truth.
 - :func:`detection_latencies`: per cell, the time from its first visible robot motion to its
   first detection.
+- :class:`EpisodeEvaluator`: all of the above streamed over an episode, as a ``metrics.json``
+  dictionary.
 - :func:`draw_likelihood_map` / :func:`save_likelihood_png`: the likelihood map over the camera
   image, like the paper's Figs. 3-5 (red: body cells, shade ~ Σ_i ε_ij; blue: cells with ṡ_j > 0).
 """
@@ -125,6 +127,54 @@ def detection_latencies(times: np.ndarray, visible_motion: np.ndarray,
             first_mark = t[np.argmax(mk[:, j])]
             out.append(max(0.0, first_mark - first_vis))
     return np.asarray(out)
+
+
+class EpisodeEvaluator:
+    """Streams one episode, frame by frame, into the metrics of issue 4 (``metrics()``).
+
+    Per frame: the label image, the detector's body mask and the tracker's ``ṡ_j``. A cell's
+    *visible motion* starts at the first frame where the robot covers at least ``body_cover`` of
+    it and ``ṡ_j > 0``. Precision, recall and IoU are of the cells ever marked body against the
+    episode's truth (:class:`CellTruth`), so a cell marked and later unmarked still counts.
+    """
+
+    def __init__(self, grid: CellGrid, body_labels: Iterable[int],
+                 distractor_labels: Iterable[int] = (), body_cover: float = 0.10):
+        self.truth = CellTruth(grid, tuple(body_labels), tuple(distractor_labels), body_cover)
+        self._times: list[float] = []
+        self._visible: list[np.ndarray] = []
+        self._marked: list[np.ndarray] = []
+
+    def update(self, time: float, label_image: np.ndarray, body_mask: np.ndarray,
+               sdot: np.ndarray) -> None:
+        n = self.truth.grid.num_cells
+        body_mask = np.asarray(body_mask).ravel() > 0
+        sdot = np.asarray(sdot, dtype=float).ravel()
+        if body_mask.shape != (n,) or sdot.shape != (n,):
+            raise ValueError(f"expected {n} cells, got mask {body_mask.shape}, sdot {sdot.shape}")
+        cover = self.truth.update(label_image)
+        self._times.append(float(time))
+        self._visible.append((cover >= self.truth.body_cover) & (sdot > 0))
+        self._marked.append(body_mask)
+
+    def metrics(self) -> dict:
+        if not self._times:
+            raise ValueError("no frames to evaluate")
+        marked = np.array(self._marked)
+        ever = marked.any(axis=0)
+        latencies = detection_latencies(np.array(self._times), np.array(self._visible), marked)
+        out = mask_metrics(ever, self.truth.truth())
+        out.update({
+            "frames": len(self._times),
+            "body_cells_true": int(np.sum(self.truth.truth() == BODY)),
+            "body_cells_marked": int(ever.sum()),
+            "distractor_cells": int(self.truth.distractor_cells().sum()),
+            "distractor_cells_marked": distractor_cells_marked(
+                ever, self.truth.distractor_cells()),
+            "latency_median_s": float(np.median(latencies)) if latencies.size else None,
+            "latency_cells": int(latencies.size),
+        })
+        return out
 
 
 def draw_likelihood_map(image: np.ndarray, grid: CellGrid, eps: np.ndarray,
