@@ -142,3 +142,8 @@ def test_a_touch_changes_the_wrench_by_the_touch_force():
     # The wrist holds the push: the reading changes by minus the touch wrench about K.
     np.testing.assert_allclose(d[3:], -f_K, atol=0.05)
     np.testing.assert_allclose(d[:3], -np.cross(p_KQ, f_K), atol=0.01)
+    # The ground truth of the touch, for evaluating touch estimation.
+    np.testing.assert_allclose(port("true_touch"), np.concatenate([[1.0], p_KQ, f_K]),
+                               atol=1e-3)
+    _, _, port_before = rest_wrench(s, 0.9)
+    np.testing.assert_array_equal(port_before("true_touch"), np.zeros(7))

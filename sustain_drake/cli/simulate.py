@@ -28,7 +28,7 @@ from sustain_drake.systems.ground_truth import PoseToVector
 # The station's vector outputs saved in log.npz, and its poses (saved as N x 4 x 4 arrays).
 LOGGED_VECTORS = ("joint_positions", "joint_velocities", "head_joint_positions", "wrench",
                   "true_p_HP", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
-                  "true_p_KCo")
+                  "true_p_KCo", "true_touch")
 LOGGED_POSES = ("X_WH", "true_X_WC")
 REPLAY_FPS = 30.0
 

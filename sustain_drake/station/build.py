@@ -66,7 +66,7 @@ EXPORTED_OUTPUTS = (
     "joint_positions", "joint_velocities", "head_joint_positions", "X_WH", "wrench",
     "color_image", "depth_image", "label_image", "image_time",
     "true_X_WC", "true_p_HP", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
-    "true_p_KCo",
+    "true_p_KCo", "true_touch",
 )
 
 
@@ -192,7 +192,9 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
                     for e in events if isinstance(e, ToolSlip)],
         pushes=[Push(e.time, e.duration, tuple(e.p_TQ), tuple(e.f_T))
                 for e in events if isinstance(e, Touch)],
-        tool_body=None if tool_body is None else tool_body.index()))
+        tool_body=None if tool_body is None else tool_body.index(),
+        sensor_body=plant.GetBodyByName(HAND_BODY).index(),
+        X_SK=plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame()))
     scheduler.set_name("disturbances")
     builder.Connect(scheduler.GetOutputPort("head_desired_state"),
                     plant.get_desired_state_input_port(head))
@@ -202,6 +204,7 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
     builder.Connect(scheduler.GetOutputPort("applied_forces"),
                     plant.get_applied_spatial_force_input_port())
     builder.Connect(plant.get_body_poses_output_port(), scheduler.GetInputPort("body_poses"))
+    builder.ExportOutput(scheduler.GetOutputPort("true_touch"), "true_touch")
 
     if person is not None:
         d = scenario.distractor

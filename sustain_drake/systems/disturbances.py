@@ -59,6 +59,7 @@ class DisturbanceScheduler(LeafSystem):
         - head_desired_state
         - tool_desired_state
         - applied_forces
+        - true_touch
 
     ``head_desired_state`` = ``[pan, tilt, pan_rate, tilt_rate]`` for the pan-tilt head's PD
     actuators (a head move). ``tool_desired_state`` = ``[slide, pivot, slide_rate,
@@ -67,10 +68,16 @@ class DisturbanceScheduler(LeafSystem):
     ``applied_spatial_force`` input (touches on the held tool); the pushes are given in the
     tool's frame and turned into the world frame with ``body_poses`` (the plant's body poses
     output, which depends on state only, so there is no algebraic loop).
+
+    ``true_touch`` (ground truth, for evaluating touch estimation) = ``[active, p_KQ, f_K]``:
+    1 while a touch is applied (else all zeros), the touched point Q and the touch force in
+    the sensor frame K (m, N), for the first active touch. K is ``X_SK`` on body S
+    (``sensor_body``).
     """
 
     def __init__(self, head_initial, head_steps: list[Step], tool_initial,
-                 tool_steps: list[Step], pushes: list[Push], tool_body: BodyIndex | None):
+                 tool_steps: list[Step], pushes: list[Push], tool_body: BodyIndex | None,
+                 sensor_body: BodyIndex | None = None, X_SK: RigidTransform | None = None):
         super().__init__()
         self._head_initial = np.asarray(head_initial, dtype=float)
         self._tool_initial = np.asarray(tool_initial, dtype=float)
@@ -80,6 +87,8 @@ class DisturbanceScheduler(LeafSystem):
         if self._pushes and tool_body is None:
             raise ValueError("a touch needs a held tool")
         self._tool_body = tool_body
+        self._sensor_body = sensor_body
+        self._X_SK = RigidTransform() if X_SK is None else X_SK
         self._poses = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()]))
         time_only = {self.time_ticket()}
@@ -94,6 +103,9 @@ class DisturbanceScheduler(LeafSystem):
         self.DeclareAbstractOutputPort(
             "applied_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
             self._calc_forces, {self.time_ticket(), self._poses.ticket()})
+        if sensor_body is not None:
+            self.DeclareVectorOutputPort("true_touch", BasicVector(7), self._calc_true_touch,
+                                         {self.time_ticket(), self._poses.ticket()})
 
     @staticmethod
     def _target(initial, steps, context) -> np.ndarray:
@@ -115,3 +127,16 @@ class DisturbanceScheduler(LeafSystem):
             force.F_Bq_W = SpatialForce(np.zeros(3), R_WB @ np.asarray(push.f_B, dtype=float))
             forces.append(force)
         output.set_value(forces)
+
+    def _calc_true_touch(self, context, output) -> None:
+        pushes = self.active_pushes(context.get_time())
+        if not pushes:
+            output.SetFromVector(np.zeros(7))
+            return
+        poses = self._poses.Eval(context)
+        X_KB = (poses[int(self._sensor_body)] @ self._X_SK).inverse() @ \
+            poses[int(self._tool_body)]
+        push = pushes[0]
+        p_KQ = X_KB @ np.asarray(push.p_BQ, dtype=float)
+        f_K = X_KB.rotation() @ np.asarray(push.f_B, dtype=float)
+        output.SetFromVector(np.concatenate([[1.0], p_KQ, f_K]))
