@@ -3,6 +3,9 @@
 Step 1 calibrates a real fixed 3-D camera against a chessboard corner on a robot's flange (the
 Jin et al. data set bundled as a test fixture) with the offline eye-to-hand calibration, and writes
 the YAML result.
+
+Step 2 simulates a few seconds of the hand-eye world (``diagrams/hand_eye.yaml``, headless) and
+says where its Meshcat replay is.
 """
 
 from __future__ import annotations
@@ -11,10 +14,12 @@ from pathlib import Path
 
 from sustain_drake.cli.calibrate import run_eye_to_hand
 from sustain_drake.cli.common import CliError
+from sustain_drake.cli.simulate import simulate_scenario
 from sustain_drake.identification import eye_to_hand
 
 REPO = Path(__file__).resolve().parents[2]
 REAL_DATA = REPO / "tests" / "data" / "jin_eyetobase_rvc_single"
+SIMULATED_SECONDS = 5.0
 
 
 def register(subparsers) -> None:
@@ -33,4 +38,11 @@ def run(args) -> int:
         args.out / "calibration.yaml",
         eye_to_hand.default_criteria(),
     )
+    print(f"== 2. {SIMULATED_SECONDS:g} simulated seconds of the hand-eye world "
+          "(diagrams/hand_eye.yaml, headless)")
+    result = simulate_scenario(REPO / "diagrams" / "hand_eye.yaml", duration=SIMULATED_SECONDS,
+                               out=args.out / "simulation")
+    print(f"simulated in {result.wall:.1f} s ({result.realtime_factor:.1f}x real time); "
+          f"logs: {result.log}")
+    print(f"open the replay in a browser: {result.replay}")
     return code
