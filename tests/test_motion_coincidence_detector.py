@@ -51,7 +51,7 @@ def test_arm_cells_coincide_with_the_actuator_and_the_distractor_never_does(run_
     q_star = detector.GetOutputPort("confirm_posture").Eval(ctx)[0]
     assert q_star == pytest.approx(0.0, abs=1e-9) or q_star == pytest.approx(0.25, abs=1e-9)
     confirm = detector.GetOutputPort("confirm").Eval(ctx)           # MotionGenerator's format
-    assert confirm.tolist() == [request[1], q_star]
+    assert confirm.tolist() == [request[1], -1.0, q_star]
     # no confirming motion was made, so nothing is body yet
     assert np.all(detector.GetOutputPort("body_cells").Eval(ctx) == 0)
     assert np.all(np.isfinite(detector.GetOutputPort("body_evidence").Eval(ctx)))

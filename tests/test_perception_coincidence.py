@@ -134,6 +134,10 @@ def test_increment_raises_a_confirming_request_at_the_onset_posture():
     p = CoincidenceParams()
     assert p.hold_min <= s.hold_time(p) <= p.hold_min + p.hold_spread
     assert not s.body(p)[0]                   # a coincidence alone is not body
+    assert s.request_joint == -1              # move all joints again, by default
+    single = drive(signal(n, (30, 60))[:, None], signal(n, (32, 60))[:, None],
+                   CoincidenceParams(single_joint_confirm=True))[-1]
+    assert single.request_joint == 0
 
 
 def test_confirming_hits_make_body_and_a_miss_takes_evidence_away():

@@ -40,7 +40,8 @@ moves by itself" (it falls in the window by chance with probability ``p0_j``). I
 2. *Confirming motions (paper §3.3.2, §4.2).* When ``ε_ij`` increments for a cell not yet body and
    no request is pending, the detector requests one: go back to the posture ``q*`` at the onset of
    the actuator motion, hold still (``hold_time``, varied per request so trials never phase-lock
-   with a periodic distractor such as a walking person), and move again. The coincidence that
+   with a periodic distractor such as a walking person), and move again (every joint, or with
+   ``single_joint_confirm`` only the most proximal candidate actuator ``request_joint``). The coincidence that
    raised the request is *not* evidence: it was selected because it coincided.
 3. *Trial* (``C_j``). The first actuator onset within ``posture_tolerance`` of ``q*`` after the
    request starts a trial. A candidate cell whose visual onset coincides (Eq. (27)) with an
@@ -98,6 +99,8 @@ class CoincidenceParams:
     beta: float = 1e-2                 # L_j floored at ln(beta)
     posture_tolerance: float = 0.05    # rad, max-norm: a confirming trial starts near q*
     confirm_timeout: float = 5.0       # s: an unanswered confirming request expires
+    single_joint_confirm: bool = False  # confirm by moving only the most proximal candidate
+    #                                    actuator (lowest index) instead of all joints
     response_window: float | None = None  # s: a trial hit's visual onset must follow the
     #                                    actuator onset within this; None: τ_s. A window as
     #                                    short as the real sensor latency makes p0_j smaller.
@@ -140,6 +143,7 @@ _FIELDS = (
     ("request_active", lambda na, nc: ()),    # 1 while a confirming motion is requested
     ("request_count", lambda na, nc: ()),     # number of requests raised so far
     ("request_time", lambda na, nc: ()),
+    ("request_joint", lambda na, nc: ()),     # joint to move again (-1: any/all)
     ("trial_active", lambda na, nc: ()),
     ("trial_t0", lambda na, nc: ()),
     ("a_prev", lambda na, nc: (na,)),         # previous actuator values a_i
@@ -378,7 +382,7 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             q = s.q_request.copy()
             _clear_request(s)
             if follow.any():
-                _raise_request(s, t, follow, q)
+                _raise_request(s, t, follow, q, params)
         return
 
     if not s.request_active:
@@ -386,16 +390,21 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
         if trigger.any():
             acts = np.flatnonzero(trigger.any(axis=1))
             latest = acts[np.argmax(s.t_onset_a[acts])]
-            _raise_request(s, t, trigger, s.q_onset[latest])
+            _raise_request(s, t, trigger, s.q_onset[latest], params)
 
 
-def _raise_request(s: CoincidenceState, t: float, pairs: np.ndarray, q: np.ndarray):
+def _raise_request(s: CoincidenceState, t: float, pairs: np.ndarray, q: np.ndarray,
+                   params: CoincidenceParams):
     # The coincidence that raises a request is not evidence: it was selected because it
     # coincided, and a busy distractor coincides often. Only the trials that follow count.
     s.request_active = np.float64(1)
     s.request_count += 1
     s.request_time = np.float64(t)
     s.q_request = np.array(q, dtype=float)
+    # Actuators are ordered from the base: the most proximal one moves every candidate cell
+    # that any more distal candidate actuator moves.
+    s.request_joint = np.float64(np.flatnonzero(pairs.any(axis=1))[0]
+                                 if params.single_joint_confirm else -1)
     s.cand_act = pairs.astype(float)
     s.candidates = pairs.any(axis=0).astype(float)
 

@@ -73,8 +73,10 @@ class MotionCoincidenceDetector(LeafSystem):
       motion generator should interrupt its motion, go back to ``confirm_posture``, hold still
       there for ``hold`` seconds, then move again (the paper's confirmative motion). A request
       not answered within ``CoincidenceParams.confirm_timeout`` expires.
-    - ``confirm``: ``[count, q*_1, ..., q*_n]``, the same request in the format of
-      ``MotionGenerator``'s edge-triggered ``confirm`` input (a new id is a new request).
+    - ``confirm``: ``[count, joint, q*_1, ..., q*_n]``, the same request in the format of
+      ``MotionGenerator``'s edge-triggered ``confirm`` input (a new id is a new request; ``joint``
+      is the one joint to move again, -1 for a usual move of all joints; see
+      ``CoincidenceParams.single_joint_confirm``).
 
     The detector reads ``visual_change`` as it was before its own update; with the tracker
     updating at the same instants that is the previous frame's flow, one frame after the
@@ -107,7 +109,8 @@ class MotionCoincidenceDetector(LeafSystem):
                 ("confirm_posture", n_a, lambda s: s.q_request),
                 ("confirm_request", 3, lambda s: np.array(
                     [s.request_active, s.request_count, s.hold_time(self._params)])),
-                ("confirm", 1 + n_a, lambda s: np.concatenate([[s.request_count], s.q_request]))):
+                ("confirm", 2 + n_a, lambda s: np.concatenate(
+                    [[s.request_count, s.request_joint], s.q_request]))):
             self.DeclareVectorOutputPort(
                 name, BasicVector(size), self._vector_calc(calc), prerequisites_of_calc=state_only)
         self.DeclareAbstractOutputPort(
