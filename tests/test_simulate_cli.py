@@ -53,6 +53,16 @@ def test_bad_arguments_are_one_line_errors(tmp_path, capsys, args, words):
     assert words in err and err.count("\n") == 1 and "Traceback" not in err
 
 
+@pytest.mark.parametrize("command", ["simulate", "graph"])
+def test_a_scenario_the_world_cannot_be_built_from_is_a_one_line_error(tmp_path, capsys,
+                                                                       command):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("camera: {X_PB: {base_frame: 'head::camera_mnt'}}\n")
+    assert main([command, str(bad), "--out", str(tmp_path / "o.dot")]) == 2
+    err = capsys.readouterr().err
+    assert "camera_mnt" in err and err.count("\n") == 1 and "Traceback" not in err
+
+
 def test_misspelled_key_is_one_line_error_naming_it(tmp_path, capsys):
     bad = tmp_path / "bad.yaml"
     bad.write_text("duration: 1\nmotion: {sead: 3}\n")

@@ -43,7 +43,10 @@ def write_graph(scenario_path: Path, out: Path | None = None,
     out = Path("out") / "graph" / f"{Path(scenario_path).stem}.dot" if out is None else Path(out)
     if out.suffix != ".dot":
         raise CliError(f"--out must end in .dot, got {out}")
-    diagram = build_station(scenario)
+    try:
+        diagram = build_station(scenario)
+    except ScenarioError as e:
+        raise CliError(f"{scenario_path}: {e}") from None
     dot = diagram.GetGraphvizString(max_depth=max_depth)
     write_atomically(out, dot)
     dot_program = shutil.which("dot")

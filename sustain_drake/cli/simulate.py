@@ -94,10 +94,14 @@ def simulate_scenario(scenario_path: Path, duration: float | None = None,
         raise CliError(f"--out {out} exists and is not a folder")
 
     meshcat = make_local_meshcat() if (replay or live) else None
+    try:
+        station = build_station(scenario, meshcat=meshcat)
+    except ScenarioError as e:
+        raise CliError(f"{scenario_path}: {e}") from None
     if live:
         print(f"Meshcat (this machine only): {meshcat.web_url()}", flush=True)
     builder = DiagramBuilder()
-    station = builder.AddSystem(build_station(scenario, meshcat=meshcat))
+    builder.AddSystem(station)
     loggers = {name: LogVectorOutput(station.GetOutputPort(name), builder, 1.0 / log_rate)
                for name in LOGGED_VECTORS}
     for name in LOGGED_POSES:

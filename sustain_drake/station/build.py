@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from pydrake.geometry import (
     LightParameter,
@@ -10,14 +12,17 @@ from pydrake.geometry import (
     MeshcatVisualizer,
     MeshcatVisualizerParams,
     RenderEngineVtkParams,
+    SceneGraph,
 )
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import GetScopedFrameByName
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
 from pydrake.multibody.tree import (
+    ModelInstanceIndex,
     PdControllerGains,
     PrismaticJoint,
     RevoluteJoint,
+    RigidBody,
     SpatialInertia,
 )
 from pydrake.systems.framework import Diagram, DiagramBuilder
@@ -30,6 +35,7 @@ from sustain_drake.station.scenario import (
     HEAD_JOINTS,
     HeadMove,
     Scenario,
+    ScenarioError,
     ToolSlip,
     Touch,
     validate_scenario,
@@ -52,6 +58,7 @@ TOOL_FILES = {"rod": "rod_tool.sdf", "box": "box_tool.sdf"}
 GRIP_GAINS = {"tool_slide": PdControllerGains(p=2.0e4, d=200.0),
               "tool_pivot": PdControllerGains(p=500.0, d=5.0)}
 SENSOR_JOINT = "ft_sensor"
+HAND_BODY = "gripper"
 # A ceiling light and a dimmer light at the camera: the table and the person's sides are not
 # black (VTK's default is a single headlight).
 ROOM_LIGHTS = [
@@ -60,7 +67,6 @@ ROOM_LIGHTS = [
     LightParameter(type="directional", frame="camera", direction=[0.0, 0.0, 1.0],
                    intensity=0.5),
 ]
-HAND_BODY = "gripper"
 
 EXPORTED_OUTPUTS = (
     "joint_positions", "joint_velocities", "head_joint_positions", "X_WH", "wrench",
@@ -95,7 +101,7 @@ def _add_grip(plant: MultibodyPlant, scenario: Scenario, arm, tool_instance):
     pivot.set_default_angle(scenario.tool.pivot)
     tool_body = plant.GetBodyByName("tool", tool_instance)
     plant.WeldFrames(pivot_link.body_frame(), tool_body.body_frame(),
-                     scenario.tool.X_GT.GetDeterministicValue())
+                     _deterministic(scenario.tool.X_GT, "tool.X_GT"))
     for joint in (slide, pivot):
         actuator = plant.AddJointActuator(joint.name(), joint)
         actuator.set_controller_gains(GRIP_GAINS[joint.name()])
@@ -119,16 +125,74 @@ def _gripper_compensation(plant: MultibodyPlant, hand, X_HK) -> GripperCompensat
     return GripperCompensation(sum(masses), tuple(p_KC), tuple(g_W))
 
 
+@dataclass
+class _World:
+    """The plant's model instances and bodies that the station's systems are wired to."""
+
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    arm: ModelInstanceIndex
+    head: ModelInstanceIndex
+    person: ModelInstanceIndex | None
+    tool: ModelInstanceIndex | None
+    tool_body: RigidBody | None
+    posture: np.ndarray  # the arm's initial posture, within the joint limits
+
+    @property
+    def hand(self) -> RigidBody:
+        return self.plant.GetBodyByName(HAND_BODY)
+
+    @property
+    def X_HK(self) -> RigidTransform:
+        """The sensor frame K (the weld's child frame Jc) in the hand frame H."""
+        return self.plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame()
+
+
+def _deterministic(transform, name: str) -> RigidTransform:
+    try:
+        return transform.GetDeterministicValue()
+    except Exception:
+        raise ScenarioError(f"{name} must be a fixed pose, not a random one") from None
+
+
 def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram:
     """Builds the world of ``scenario`` as a Diagram named ``station``.
 
     Exported outputs: see ``EXPORTED_OUTPUTS`` and the README's Simulation section (the
     camera ports exist only when the scenario's camera renders them). Exported inputs:
     ``motion_pause`` and ``motion_confirm`` (the MotionGenerator's requests). With a
-    ``meshcat``, the scene is also drawn there (illustration geometry).
+    ``meshcat``, the scene is also drawn there (illustration geometry). A scenario the world
+    cannot be built from raises ``ScenarioError``.
     """
     validate_scenario(scenario)
     builder = DiagramBuilder()
+    world = _add_world(builder, scenario)
+    _add_motion_generator(builder, world, scenario)
+    _add_disturbances(builder, world, scenario)
+    if world.person is not None:
+        _add_distractor(builder, world, scenario)
+    _add_proprioception(builder, world)
+    wrench = _add_wrench_sensor(builder, world, scenario)
+    camera_body, X_BS = _camera_mount(world.plant, scenario)
+    cam = scenario.camera
+    if cam.rgb or cam.depth or cam.label:
+        _add_camera(builder, world.plant, world.scene_graph, scenario, camera_body, X_BS)
+    truth = _add_ground_truth(builder, world, camera_body,
+                              X_BS @ _deterministic(cam.X_BC, "camera.X_BC"))
+    if wrench.HasInputPort("X_WK"):
+        builder.Connect(truth.GetOutputPort("X_WH"), wrench.GetInputPort("X_WK"))
+    if meshcat is not None:
+        # Illustration geometry only, at the camera's rate: enough for a replay, and cheap.
+        MeshcatVisualizer.AddToBuilder(builder, world.scene_graph, meshcat,
+                                       MeshcatVisualizerParams(publish_period=1.0 / 30.0))
+    diagram = builder.Build()
+    diagram.set_name("station")
+    return diagram
+
+
+def _add_world(builder: DiagramBuilder, scenario: Scenario) -> _World:
+    """The plant: arm on its pedestal, table, head, the held tool and the person, starting in
+    the scenario's initial state (arm posture, closed gripper, head angles)."""
     plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
     parser = make_parser(plant)
     arm = parser.AddModels(model_file("arm.sdf"))[0]
@@ -137,34 +201,40 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("arm_base", arm), X_W_ARM)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table), X_W_TABLE)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("head_post", head),
-                     scenario.head.X_WP.GetDeterministicValue())
+                     _deterministic(scenario.head.X_WP, "head.X_WP"))
     person = None
     if scenario.distractor.enabled:
         person = parser.AddModels(model_file("person.sdf"))[0]
-    tool_instance = tool_body = None
+    tool = tool_body = None
     if scenario.tool.model != "none":
-        tool_instance = parser.AddModels(model_file(TOOL_FILES[scenario.tool.model]))[0]
-        tool_body = _add_grip(plant, scenario, arm, tool_instance)
+        tool = parser.AddModels(model_file(TOOL_FILES[scenario.tool.model]))[0]
+        tool_body = _add_grip(plant, scenario, arm, tool)
 
-    # The initial state is the scenario's: arm posture, closed gripper, head angles, path start.
+    joints = [plant.GetJointByName(j) for j in ARM_JOINTS]
     posture = np.clip(scenario.motion.initial_posture,
-                      [plant.GetJointByName(j).position_lower_limits()[0] for j in ARM_JOINTS],
-                      [plant.GetJointByName(j).position_upper_limits()[0] for j in ARM_JOINTS])
-    for name, angle in zip(ARM_JOINTS, posture, strict=True):
-        plant.GetJointByName(name).set_default_angle(angle)
+                      [j.position_lower_limits()[0] for j in joints],
+                      [j.position_upper_limits()[0] for j in joints])
+    for joint, angle in zip(joints, posture, strict=True):
+        joint.set_default_angle(angle)
     plant.GetJointByName("gripper_joint").set_default_translation(scenario.tool.gripper_position)
     plant.GetJointByName("head_pan").set_default_angle(scenario.head.pan)
     plant.GetJointByName("head_tilt").set_default_angle(scenario.head.tilt)
     plant.Finalize()
+    return _World(plant, scene_graph, arm, head, person, tool, tool_body, posture)
 
-    # Babbling arm: 5 joints from the motion generator, the gripper held closed.
-    m = scenario.motion
-    lower = [max(r[0], plant.GetJointByName(j).position_lower_limits()[0])
-             for r, j in zip(m.joint_ranges, ARM_JOINTS, strict=True)]
-    upper = [min(r[1], plant.GetJointByName(j).position_upper_limits()[0])
-             for r, j in zip(m.joint_ranges, ARM_JOINTS, strict=True)]
+
+def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
+    """Babbling arm: the 5 joints from the motion generator, the gripper held closed."""
+    plant, m = world.plant, scenario.motion
+    joints = [plant.GetJointByName(j) for j in ARM_JOINTS]
+    lower = [max(r[0], j.position_lower_limits()[0])
+             for r, j in zip(m.joint_ranges, joints, strict=True)]
+    upper = [min(r[1], j.position_upper_limits()[0])
+             for r, j in zip(m.joint_ranges, joints, strict=True)]
+    if any(lo > hi for lo, hi in zip(lower, upper, strict=True)):
+        raise ScenarioError("motion.joint_ranges lie outside the arm's joint limits")
     motion = builder.AddSystem(MotionGenerator(
-        lower, upper, posture, seed=m.seed, max_speed=m.max_speed,
+        lower, upper, world.posture, seed=m.seed, max_speed=m.max_speed,
         min_duration=m.min_duration, dwell=m.dwell, period=m.period))
     motion.set_name("motion_generator")
     n = len(ARM_JOINTS)
@@ -177,12 +247,14 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
     arm_desired = builder.AddSystem(AffineSystem(D=D, y0=y0))
     arm_desired.set_name("arm_desired_state")
     builder.Connect(motion.get_output_port(), arm_desired.get_input_port())
-    builder.Connect(arm_desired.get_output_port(), plant.get_desired_state_input_port(arm))
+    builder.Connect(arm_desired.get_output_port(), plant.get_desired_state_input_port(world.arm))
     builder.ExportInput(motion.GetInputPort("pause"), "motion_pause")
     builder.ExportInput(motion.GetInputPort("confirm"), "motion_confirm")
 
-    # Disturbances: head moves, tool slips, touches.
-    events = scenario.disturbances
+
+def _add_disturbances(builder, world: _World, scenario: Scenario) -> None:
+    """The timeline: head moves, tool slips, touches (and the touches' ground truth)."""
+    plant, events = world.plant, scenario.disturbances
     scheduler = builder.AddSystem(DisturbanceScheduler(
         head_initial=[scenario.head.pan, scenario.head.tilt],
         head_steps=[Step(e.time, (e.pan, e.tilt), e.duration)
@@ -192,95 +264,99 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
                     for e in events if isinstance(e, ToolSlip)],
         pushes=[Push(e.time, e.duration, tuple(e.p_TQ), tuple(e.f_T))
                 for e in events if isinstance(e, Touch)],
-        tool_body=None if tool_body is None else tool_body.index(),
-        sensor_body=plant.GetBodyByName(HAND_BODY).index(),
-        X_SK=plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame()))
+        tool_body=None if world.tool_body is None else world.tool_body.index(),
+        sensor_body=world.hand.index(), X_SK=world.X_HK))
     scheduler.set_name("disturbances")
+    builder.Connect(plant.get_body_poses_output_port(), scheduler.GetInputPort("body_poses"))
     builder.Connect(scheduler.GetOutputPort("head_desired_state"),
-                    plant.get_desired_state_input_port(head))
-    if tool_instance is not None:
+                    plant.get_desired_state_input_port(world.head))
+    if world.tool is not None:
         builder.Connect(scheduler.GetOutputPort("tool_desired_state"),
-                        plant.get_desired_state_input_port(tool_instance))
+                        plant.get_desired_state_input_port(world.tool))
     builder.Connect(scheduler.GetOutputPort("applied_forces"),
                     plant.get_applied_spatial_force_input_port())
-    builder.Connect(plant.get_body_poses_output_port(), scheduler.GetInputPort("body_poses"))
     builder.ExportOutput(scheduler.GetOutputPort("true_touch"), "true_touch")
 
-    if person is not None:
-        d = scenario.distractor
-        path = builder.AddSystem(DistractorPath(d.waypoints, d.speed, d.start_time, d.loop))
-        path.set_name("distractor_path")
-        start = path.state_at(0.0)
-        for name, value in zip(("person_x_joint", "person_y_joint"), start[:2], strict=True):
-            plant.GetJointByName(name).set_default_translation(value)
-        plant.GetJointByName("person_yaw").set_default_angle(start[2])
-        builder.Connect(path.get_output_port(), plant.get_desired_state_input_port(person))
 
-    # Proprioception.
+def _add_distractor(builder, world: _World, scenario: Scenario) -> None:
+    """The person walks the scenario's path (PD-tracked x-y-yaw joints), from its start."""
+    d, plant = scenario.distractor, world.plant
+    path = builder.AddSystem(DistractorPath(d.waypoints, d.speed, d.start_time, d.loop))
+    path.set_name("distractor_path")
+    start = path.state_at(0.0)
+    plant.GetJointByName("person_x_joint").set_default_translation(start[0])
+    plant.GetJointByName("person_y_joint").set_default_translation(start[1])
+    plant.GetJointByName("person_yaw").set_default_angle(start[2])
+    builder.Connect(path.get_output_port(), plant.get_desired_state_input_port(world.person))
+
+
+def _add_proprioception(builder, world: _World) -> None:
+    """The joint encoders: arm positions and velocities, head positions."""
     for name, joints, velocities in (("joint_positions", ARM_JOINTS, False),
                                      ("joint_velocities", ARM_JOINTS, True),
                                      ("head_joint_positions", HEAD_JOINTS, False)):
-        gain = builder.AddSystem(MatrixGain(_selector(plant, joints, velocities)))
+        gain = builder.AddSystem(MatrixGain(_selector(world.plant, joints, velocities)))
         gain.set_name(name)
-        builder.Connect(plant.get_state_output_port(), gain.get_input_port())
+        builder.Connect(world.plant.get_state_output_port(), gain.get_input_port())
         builder.ExportOutput(gain.get_output_port(), name)
 
-    # Wrist force/torque sensor on the weld (K = Jc, the weld's frame on the gripper side).
-    w = scenario.wrench_sensor
-    sensor_joint = plant.GetJointByName(SENSOR_JOINT)
-    hand = plant.GetBodyByName(HAND_BODY)
-    X_HK = sensor_joint.frame_on_child().GetFixedPoseInBodyFrame()
-    compensation = _gripper_compensation(plant, hand, X_HK) if w.compensate_gripper else None
+
+def _add_wrench_sensor(builder, world: _World, scenario: Scenario) -> WristWrenchSensor:
+    """The wrist F/T sensor on the weld (K = Jc, the weld's frame on the gripper side)."""
+    w, plant = scenario.wrench_sensor, world.plant
+    compensation = None
+    if w.compensate_gripper:
+        if not world.X_HK.IsExactlyIdentity():
+            raise ScenarioError("gripper compensation needs the sensor frame K = hand H")
+        compensation = _gripper_compensation(plant, world.hand, world.X_HK)
     wrench = builder.AddSystem(WristWrenchSensor(
-        sensor_joint.index(), 1.0 / w.rate, w.force_noise, w.torque_noise, w.bias, w.seed,
-        compensation))
+        plant.GetJointByName(SENSOR_JOINT).index(), 1.0 / w.rate, w.force_noise,
+        w.torque_noise, w.bias, w.seed, compensation))
     wrench.set_name("wrench_sensor")
     builder.Connect(plant.get_reaction_forces_output_port(),
                     wrench.GetInputPort("reaction_forces"))
     builder.ExportOutput(wrench.get_output_port(), "wrench")
+    return wrench
 
-    # RGB-D camera on the head.
+
+def _camera_mount(plant: MultibodyPlant, scenario: Scenario):
+    """The body carrying the camera and the camera sensor body's pose S in it."""
     cam = scenario.camera
-    camera_frame = (GetScopedFrameByName(plant, cam.X_PB.base_frame)
-                    if cam.X_PB.base_frame else plant.world_frame())
-    X_BS = camera_frame.GetFixedPoseInBodyFrame() @ cam.X_PB.GetDeterministicValue()
-    if cam.rgb or cam.depth or cam.label:
-        _add_camera(builder, plant, scene_graph, scenario, camera_frame.body(), X_BS)
+    try:
+        frame = (GetScopedFrameByName(plant, cam.X_PB.base_frame)
+                 if cam.X_PB.base_frame else plant.world_frame())
+    except RuntimeError:
+        raise ScenarioError(
+            f"camera.X_PB.base_frame: no frame named '{cam.X_PB.base_frame}' "
+            "(the head's is 'head::camera_mount')") from None
+    return frame.body(), frame.GetFixedPoseInBodyFrame() @ _deterministic(cam.X_PB,
+                                                                          "camera.X_PB")
 
-    # Hand pose and ground truth.
+
+def _add_ground_truth(builder, world: _World, camera_body, X_BC) -> GroundTruth:
+    """Hand pose and the evaluation-only ground truth (camera pose, tool point, masses)."""
+    plant = world.plant
     wrist_roll = plant.GetJointByName(ARM_JOINTS[-1])
     outboard = [b for b in plant.GetBodiesKinematicallyAffectedBy([wrist_roll.index()])
                 if b != wrist_roll.child_body().index()]
-    tracked = (plant.GetFrameByName("tracked_point", tool_instance) if tool_instance is not None
-               else plant.GetFrameByName("grasp", arm))
+    tracked = (plant.GetFrameByName("tracked_point", world.tool) if world.tool is not None
+               else plant.GetFrameByName("grasp", world.arm))
 
     def point_mass(body):
         return PointMass(int(body.index()), body.default_mass(), tuple(body.default_com()))
 
     truth = builder.AddSystem(GroundTruth(
-        hand_body=hand.index(), X_HK=X_HK, camera_body=camera_frame.body().index(),
-        X_BC=X_BS @ cam.X_BC.GetDeterministicValue(),
-        tool_body=tracked.body().index(),
+        hand_body=world.hand.index(), X_HK=world.X_HK, camera_body=camera_body.index(),
+        X_BC=X_BC, tool_body=tracked.body().index(),
         p_TP=tracked.GetFixedPoseInBodyFrame().translation(),
-        tool=None if tool_body is None else point_mass(tool_body),
+        tool=None if world.tool_body is None else point_mass(world.tool_body),
         outboard=[point_mass(plant.get_body(b)) for b in outboard]))
     truth.set_name("ground_truth")
     builder.Connect(plant.get_body_poses_output_port(), truth.get_input_port())
-    if compensation is not None:
-        if not X_HK.IsExactlyIdentity():
-            raise ValueError("gripper compensation assumes the sensor frame K is the hand H")
-        builder.Connect(truth.GetOutputPort("X_WH"), wrench.GetInputPort("X_WK"))
     for port in ("X_WH", "true_X_WC", "true_p_HP", "true_tool_mass", "true_p_KCm",
                  "true_outboard_mass", "true_p_KCo"):
         builder.ExportOutput(truth.GetOutputPort(port), port)
-
-    if meshcat is not None:
-        # Illustration geometry only, at the camera's rate: enough for a replay, and cheap.
-        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, MeshcatVisualizerParams(
-            publish_period=1.0 / 30.0))
-    diagram = builder.Build()
-    diagram.set_name("station")
-    return diagram
+    return truth
 
 
 def _add_camera(builder, plant, scene_graph, scenario: Scenario, body, X_BS) -> None:
