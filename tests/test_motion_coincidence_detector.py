@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from test_optical_flow_tracker import CAMERA, GRID_SHAPE, MovingScene, build_scene_diagram
+from test_optical_flow_tracker import CAMERA, GRID_SHAPE, MovingScene, W, build_scene_diagram
 
 from sustain_drake.perception.coincidence import CoincidenceState
 from sustain_drake.systems.motion_coincidence_detector import (
@@ -71,8 +71,11 @@ def test_feature_on_body_follows_the_body_cells(run_2s):
         tracker.GetMyContextFromRoot(ctx))
     assert isinstance(flags, FeatureBodyFlags)
     assert np.array_equal(flags.ids, features.ids)
-    assert np.array_equal(flags.on_body, np.isin(features.cell, body_cells))
-    assert np.all(flags.actuator[flags.on_body] == 0) and np.all(flags.actuator[~flags.on_body] == -1)
+    in_cell = np.isin(features.cell, body_cells)
+    assert np.array_equal(flags.in_body_cell, in_cell)
+    assert not flags.on_body.any()              # no feature went through a confirming trial
+    assert np.all(flags.actuator[in_cell] == 0) and np.all(flags.actuator[~in_cell] == -1)
+    assert not detector.GetOutputPort("body_feature_cells").Eval(dctx).any()
     assert np.array_equal(detector.GetOutputPort("body_cells").Eval(dctx).nonzero()[0], body_cells)
     moves = detector.GetOutputPort("actuator_cells").Eval(dctx)
     assert np.array_equal(np.flatnonzero(moves), body_cells)
@@ -86,6 +89,9 @@ def test_cloned_context_replays_identically(run_2s):
     a = detector.GetMyContextFromRoot(sim.get_context()).get_discrete_state_vector().value()
     b = detector.GetMyContextFromRoot(sim2.get_context()).get_discrete_state_vector().value()
     assert before == 0 and np.array_equal(a, b)
+    ma = detector.feature_memory(detector.GetMyContextFromRoot(sim.get_context()))
+    mb = detector.feature_memory(detector.GetMyContextFromRoot(sim2.get_context()))
+    assert ma is not mb and np.array_equal(ma.ids, mb.ids) and np.array_equal(ma.hits, mb.hits)
     assert a.size == CoincidenceState.size(1, 48)
 
 
@@ -153,14 +159,23 @@ def test_closed_loop_confirming_motions_mark_arm_cells_and_never_the_distractor(
     builder.Connect(scene.GetOutputPort("depth_image"), tracker.GetInputPort("depth_image"))
     builder.Connect(arm.GetOutputPort("position"), detector.GetInputPort("actuator_positions"))
     builder.Connect(tracker.GetOutputPort("visual_change"), detector.GetInputPort("visual_change"))
+    builder.Connect(tracker.GetOutputPort("tracked_features"),
+                    detector.GetInputPort("tracked_features"))
     builder.Connect(detector.GetOutputPort("confirm_request"), arm.GetInputPort("confirm_request"))
     builder.Connect(detector.GetOutputPort("confirm_posture"), arm.GetInputPort("confirm_posture"))
     sim = Simulator(builder.Build())
     ctx = detector.GetMyContextFromRoot(sim.get_context())
+    tctx = tracker.GetMyContextFromRoot(sim.get_context())
     ever = np.zeros(tracker.grid.num_cells, bool)
+    ever_feature_cells = np.zeros(tracker.grid.num_cells, bool)
+    body_feature_u = []
     for k in range(1, 12 * 30):
         sim.AdvanceTo(k / 30.0)
         ever |= detector.GetOutputPort("body_cells").Eval(ctx) > 0
+        ever_feature_cells |= detector.GetOutputPort("body_feature_cells").Eval(ctx) > 0
+        flags = detector.GetOutputPort("feature_on_body").Eval(ctx)
+        f = tracker.GetOutputPort("tracked_features").Eval(tctx)
+        body_feature_u.extend(f.p_px[flags.on_body, 0].tolist())
     cols = columns(tracker)
     rows = np.arange(tracker.grid.num_cells) // tracker.grid.cols
     arm_cells = cols <= 2
@@ -168,3 +183,6 @@ def test_closed_loop_confirming_motions_mark_arm_cells_and_never_the_distractor(
     assert detector.GetOutputPort("confirm_request").Eval(ctx)[1] >= 2
     assert ever[arm_cells].mean() >= 0.8
     assert not ever[cols >= 5].any() and not ever[distractor_cells].any()
+    # features confirmed one by one: on the arm half only, and they mark its cells
+    assert len(body_feature_u) > 100 and max(body_feature_u) < W // 2 + 10
+    assert ever_feature_cells[arm_cells].mean() >= 0.5 and not ever_feature_cells[cols >= 5].any()

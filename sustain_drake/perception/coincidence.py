@@ -146,6 +146,8 @@ _FIELDS = (
     ("request_joint", lambda na, nc: ()),     # joint to move again (-1: any/all)
     ("trial_active", lambda na, nc: ()),
     ("trial_t0", lambda na, nc: ()),
+    ("trial_count", lambda na, nc: ()),       # trials started so far
+    ("trial_until", lambda na, nc: ()),       # end of the latest trial's response window
     ("a_prev", lambda na, nc: (na,)),         # previous actuator values a_i
     ("last_motion_a", lambda na, nc: (na,)),  # last time actuator i moved
     ("t_onset_a", lambda na, nc: (na,)),      # last onset time of actuator i
@@ -158,6 +160,7 @@ _FIELDS = (
     ("t_still", lambda na, nc: (nc,)),        # T_still,j: still time the cell could have onset, s
     ("evidence", lambda na, nc: (nc,)),       # L_j
     ("candidates", lambda na, nc: (nc,)),     # cells under test by the pending request
+    ("trial_cells", lambda na, nc: (nc,)),    # cells tested by the latest trial (kept after it)
     ("eps", lambda na, nc: (na, nc)),         # ε_ij, Eq. (27)
     ("counted_ta", lambda na, nc: (na, nc)),  # onset pair last counted into ε_ij
     ("counted_ts", lambda na, nc: (na, nc)),
@@ -184,7 +187,7 @@ class CoincidenceState:
         for name, shape in _FIELDS:
             setattr(self, name, np.zeros(shape(self.n_a, self.n_c)))
         for name in ("t_prev", "last_motion_a", "t_onset_a", "last_motion_s", "t_onset_s",
-                     "counted_ta", "counted_ts", "request_time", "trial_t0"):
+                     "counted_ta", "counted_ts", "request_time", "trial_t0", "trial_until"):
             getattr(self, name)[...] = NEVER
 
     @staticmethod
@@ -353,6 +356,9 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
         if started_near:
             s.trial_active = np.float64(1)
             s.trial_t0 = np.float64(t)
+            s.trial_count += 1
+            s.trial_until = np.float64(t + params.trial_window)
+            s.trial_cells = s.candidates.copy()
             s.trial_moved[:] = 0
             s.trial_hit[:] = 0
         elif t - s.request_time > params.confirm_timeout:

@@ -14,6 +14,12 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from sustain_drake.perception.body_features import (
+    FeatureMemory,
+    FeatureParams,
+    features_on_body,
+    update_feature_memory,
+)
 from sustain_drake.perception.coincidence import (
     CoincidenceParams,
     CoincidenceState,
@@ -25,10 +31,12 @@ from sustain_drake.perception.optical_flow import TrackedFeatures
 @dataclass
 class FeatureBodyFlags:
     """Per tracked feature (same order as the ``tracked_features`` input): its id, whether it
-    lies in a body cell, and the actuator that moves its cell most (-1 if none)."""
+    is on the body (its own confirming-trial hits, :mod:`sustain_drake.perception.body_features`),
+    whether it lies in a body cell, and the actuator that moves its cell most (-1 if none)."""
 
     ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     on_body: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    in_body_cell: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     actuator: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
@@ -48,6 +56,7 @@ class MotionCoincidenceDetector(LeafSystem):
         - actuator_cells
         - body_evidence
         - feature_on_body
+        - body_feature_cells
         - confirm_posture
         - confirm_request
         - confirm
@@ -56,7 +65,7 @@ class MotionCoincidenceDetector(LeafSystem):
 
     - ``actuator_positions``: the actuator values ``a_i`` (joint encoders, rad), size ``n_a``.
     - ``visual_change``: ``ṡ_j`` (px/s) per grid cell, size ``n_c`` (``OpticalFlowTracker``).
-    - ``tracked_features`` (optional): ``TrackedFeatures``; only used by ``feature_on_body``.
+    - ``tracked_features`` (optional): ``TrackedFeatures``, for the per-feature outputs.
 
     Output ports (all but ``feature_on_body`` depend on state only):
 
@@ -67,6 +76,8 @@ class MotionCoincidenceDetector(LeafSystem):
       confirming hits than misses for the pair).
     - ``body_evidence``: ``L_j`` (log-likelihood ratio, dimensionless), size ``n_c``.
     - ``feature_on_body``: :class:`FeatureBodyFlags` for the features on the input.
+    - ``body_feature_cells``: 1 for cells that hold at least one body feature now (size
+      ``n_c``): the body where it is now, as the arm carries its confirmed features around.
     - ``confirm_posture``: ``q*`` (rad, size ``n_a``): the posture at the onset of the actuator
       motion that raised the current confirming request; the last one when none is active.
     - ``confirm_request``: ``[active (0/1), count, hold (s)]``. When ``count`` increases, the
@@ -84,12 +95,14 @@ class MotionCoincidenceDetector(LeafSystem):
     """
 
     def __init__(self, num_actuators: int, num_cells: int, period: float = 1.0 / 30.0,
-                 offset: float = 0.0, params: CoincidenceParams | None = None):
+                 offset: float = 0.0, params: CoincidenceParams | None = None,
+                 feature_params: FeatureParams | None = None):
         super().__init__()
         if not (np.isfinite(period) and period > 0):
             raise ValueError(f"period must be positive, got {period}")
         self._n_a, self._n_c = int(num_actuators), int(num_cells)
         self._params = CoincidenceParams() if params is None else params
+        self._feature_params = FeatureParams() if feature_params is None else feature_params
         initial = CoincidenceState(self._n_a, self._n_c)   # raises on a bad size
 
         self._a = self.DeclareVectorInputPort("actuator_positions", self._n_a)
@@ -97,7 +110,9 @@ class MotionCoincidenceDetector(LeafSystem):
         self._features = self.DeclareAbstractInputPort(
             "tracked_features", AbstractValue.Make(TrackedFeatures()))
         self._state_index = self.DeclareDiscreteState(initial.to_vector())
-        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
+        self._memory_index = self.DeclareAbstractState(AbstractValue.Make(FeatureMemory()))
+        # Unrestricted: one event updates the cell state (discrete) and the features' (abstract).
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update)
 
         state_only = {self.discrete_state_ticket(self._state_index)}
         n_a, n_c = self._n_a, self._n_c
@@ -113,11 +128,13 @@ class MotionCoincidenceDetector(LeafSystem):
                     [[s.request_count, s.request_joint], s.q_request]))):
             self.DeclareVectorOutputPort(
                 name, BasicVector(size), self._vector_calc(calc), prerequisites_of_calc=state_only)
+        with_features = {self.all_state_ticket(), self._features.ticket()}
         self.DeclareAbstractOutputPort(
             "feature_on_body", lambda: AbstractValue.Make(FeatureBodyFlags()),
-            self._calc_feature_on_body,
-            prerequisites_of_calc={self.discrete_state_ticket(self._state_index),
-                                   self._features.ticket()})
+            self._calc_feature_on_body, prerequisites_of_calc=with_features)
+        self.DeclareVectorOutputPort(
+            "body_feature_cells", BasicVector(n_c), self._calc_body_feature_cells,
+            prerequisites_of_calc=with_features)
 
     @property
     def params(self) -> CoincidenceParams:
@@ -133,10 +150,30 @@ class MotionCoincidenceDetector(LeafSystem):
             output.SetFromVector(fn(self.detector_state(context)))
         return calc
 
-    def _update(self, context, discrete_state):
-        new = step(self.detector_state(context), context.get_time(), self._a.Eval(context),
+    def feature_memory(self, context) -> FeatureMemory:
+        """The per-feature memory in ``context`` (read only)."""
+        return context.get_abstract_state(self._memory_index).get_value()
+
+    def _update(self, context, state):
+        t = context.get_time()
+        new = step(self.detector_state(context), t, self._a.Eval(context),
                    self._sdot.Eval(context), self._params)
-        discrete_state.get_mutable_vector(self._state_index).SetFromVector(new.to_vector())
+        state.get_mutable_discrete_state().get_mutable_vector(self._state_index).SetFromVector(
+            new.to_vector())
+        if self._features.HasValue(context):
+            f = self._features.Eval(context)
+            memory = update_feature_memory(self.feature_memory(context), new, t, f.ids, f.cell,
+                                           f.flow_px, self._feature_params)
+            state.get_mutable_abstract_state(self._memory_index).set_value(memory)
+
+    def _calc_body_feature_cells(self, context, output):
+        cells = np.zeros(self._n_c)
+        if self._features.HasValue(context):
+            f = self._features.Eval(context)
+            on = features_on_body(self.feature_memory(context), f.ids, self._feature_params)
+            cell = np.asarray(f.cell, np.int64)[on]
+            cells[cell[(cell >= 0) & (cell < self._n_c)]] = 1.0
+        output.SetFromVector(cells)
 
     def _calc_feature_on_body(self, context, output):
         if not self._features.HasValue(context):
@@ -151,12 +188,14 @@ class MotionCoincidenceDetector(LeafSystem):
         body = s.body(self._params)
         moves = s.moves(self._params)
         inside = cell >= 0
-        on_body = np.zeros(cell.size, bool)
-        on_body[inside] = body[cell[inside]]
+        in_body_cell = np.zeros(cell.size, bool)
+        in_body_cell[inside] = body[cell[inside]]
         actuator = np.full(cell.size, -1, np.int64)
         strength = np.where(moves, s.hits - s.misses, -np.inf)
         best = np.argmax(strength, axis=0)
         has = moves.any(axis=0)
         actuator[inside] = np.where(has[cell[inside]], best[cell[inside]], -1)
+        on_body = features_on_body(self.feature_memory(context), features.ids,
+                                   self._feature_params)
         output.set_value(FeatureBodyFlags(ids=np.array(features.ids, np.int64), on_body=on_body,
-                                          actuator=actuator))
+                                          in_body_cell=in_body_cell, actuator=actuator))
