@@ -10,7 +10,8 @@ shared, noisy machine:
 - tracker core (``track_frame``: gray conversion, LK forward + backward, re-seeding, ṡ_j,
   back-projection) with the default re-seeding rule, and with re-seeding on every frame that
   lost any feature, and a frame seeded from scratch (the first one);
-- detector core (``coincidence.step``, Eq. (27) and the body rule);
+- detector core (``coincidence.step``, Eq. (27) and the body rule, and the per-feature
+  memory ``body_features.update_feature_memory``);
 - both as Drake LeafSystems in a Diagram driven by a Simulator (system and port overhead
   included), the scene coming from a frame player whose own cost is negligible.
 """
@@ -33,6 +34,10 @@ from pydrake.systems.analysis import Simulator  # noqa: E402
 from pydrake.systems.framework import DiagramBuilder, LeafSystem  # noqa: E402
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U  # noqa: E402
 
+from sustain_drake.perception.body_features import (  # noqa: E402
+    FeatureMemory,
+    update_feature_memory,
+)
 from sustain_drake.perception.coincidence import (  # noqa: E402
     CoincidenceParams,
     CoincidenceState,
@@ -84,6 +89,7 @@ def time_cores(frames, joints, depth, camera, params=None):
     tracker = OpticalFlowTracker(camera)
     grid = tracker.grid
     ts, det = TrackerState.initial(grid), CoincidenceState(N_A, grid.num_cells)
+    memory = FeatureMemory()
     t_track, t_det, reseeded = [], [], []
     for k, frame in enumerate(frames):
         t = k / FPS
@@ -91,6 +97,8 @@ def time_cores(frames, joints, depth, camera, params=None):
         new = track_frame(ts, frame, depth, t, intr, grid, params)
         t1 = time.perf_counter()
         det = step(det, t + 1e-9, joints[k], new.sdot)
+        f = new.features
+        memory = update_feature_memory(memory, det, t + 1e-9, f.ids, f.cell, f.flow_px)
         t2 = time.perf_counter()
         reseeded.append(new.next_id != ts.next_id)
         ts = new
