@@ -136,6 +136,9 @@ def test_confirm_with_a_joint_moves_only_that_joint_after_returning(joint):
     assert others_moved.any()
     confirming = after[:np.argmax(others_moved), joint]
     assert np.max(np.abs(confirming - target[joint])) >= 0.3 * (UPPER[joint] - LOWER[joint])
+    # It rests at the posture (confirm_hold, 0.5 s by default) before moving again.
+    rest = np.abs(after[:, joint] - target[joint]) < 1e-12
+    assert 0.45 <= np.argmin(rest) * 0.01 <= 0.56
 
 
 @pytest.mark.parametrize("args", [

@@ -235,7 +235,8 @@ def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
         raise ScenarioError("motion.joint_ranges lie outside the arm's joint limits")
     motion = builder.AddSystem(MotionGenerator(
         lower, upper, world.posture, seed=m.seed, max_speed=m.max_speed,
-        min_duration=m.min_duration, dwell=m.dwell, period=m.period))
+        min_duration=m.min_duration, dwell=m.dwell, period=m.period,
+        confirm_hold=m.confirm_hold))
     motion.set_name("motion_generator")
     n = len(ARM_JOINTS)
     # The arm instance's desired state is [q_1..q_5, q_grip, v_1..v_5, v_grip].

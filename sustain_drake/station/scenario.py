@@ -88,6 +88,7 @@ class MotionConfig:
     max_speed: float = 0.6  # rad/s, the peak joint speed of a move (the pace)
     min_duration: float = 1.0  # s, the shortest move
     dwell: float = 0.0  # s of rest after each move (quasi-static identification)
+    confirm_hold: float = 0.5  # s of rest at a confirm posture before moving again
     period: float = 0.01  # s between the generator's updates
 
 
@@ -258,8 +259,10 @@ def validate_scenario(s: Scenario) -> None:
     _check(len(m.initial_posture) == len(ARM_JOINTS),
            f"motion.initial_posture needs {len(ARM_JOINTS)} angles")
     _finite(m.initial_posture, "motion.initial_posture")
-    _check(m.max_speed > 0 and m.min_duration > 0 and m.dwell >= 0 and m.period > 0,
-           "motion: max_speed, min_duration and period must be > 0, dwell >= 0")
+    _check(m.max_speed > 0 and m.min_duration > 0 and m.dwell >= 0 and m.period > 0
+           and m.confirm_hold >= 0,
+           "motion: max_speed, min_duration and period must be > 0, dwell and confirm_hold "
+           ">= 0")
     w = s.wrench_sensor
     _check(w.rate > 0 and w.force_noise >= 0 and w.torque_noise >= 0,
            "wrench_sensor: rate must be > 0 and noise >= 0")

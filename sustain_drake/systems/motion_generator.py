@@ -9,8 +9,9 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 (_T0, _DURATION, _SEGMENT, _KIND, _PAUSE_ID, _CONFIRM_ID, _CONFIRM_JOINT,
  _PAUSE_LEFT) = range(8)
 _HEADER = 8
-# Segment kinds: a babbling move, a rest, the move back to a posture to confirm, braking.
-_MOVE, _HOLD, _RETURN, _BRAKE = 0.0, 1.0, 2.0, 3.0
+# Segment kinds: a babbling move, a rest, the move back to a posture to confirm, braking, the
+# rest at that posture before the confirming move.
+_MOVE, _HOLD, _RETURN, _BRAKE, _CONFIRM_REST = 0.0, 1.0, 2.0, 3.0, 4.0
 # Peak deceleration when a pause interrupts a move, rad/s^2.
 _BRAKE_ACCELERATION = 3.0
 # A confirming single-joint move covers at least this fraction of the joint's range.
@@ -61,7 +62,8 @@ class MotionGenerator(LeafSystem):
       (peak deceleration 3 rad/s^2, so within about 0.3 s at the default pace), hold still for
       ``duration`` s, then continue babbling.
     - ``confirm`` = ``[request_id, joint, q_1, ..., q_n]``: when ``request_id`` changes, go
-      back to the posture ``q`` (at the pace) and then move again from there: only joint
+      back to the posture ``q`` (at the pace), rest there ``confirm_hold`` s (so the move
+      again has a clear onset), and then move again from there: only joint
       ``joint`` (0-based, by at least 30 % of its range) when ``joint >= 0``, so the visual
       change can be attributed to that joint, or a usual random move when ``joint < 0`` (the
       paper's confirming motion after a coincidence).
@@ -74,7 +76,8 @@ class MotionGenerator(LeafSystem):
     """
 
     def __init__(self, lower, upper, initial_posture, seed: int = 0, max_speed: float = 0.5,
-                 min_duration: float = 1.0, dwell: float = 0.0, period: float = 0.01):
+                 min_duration: float = 1.0, dwell: float = 0.0, period: float = 0.01,
+                 confirm_hold: float = 0.5):
         super().__init__()
         self._lower = np.asarray(lower, dtype=float)
         self._upper = np.asarray(upper, dtype=float)
@@ -85,14 +88,17 @@ class MotionGenerator(LeafSystem):
         if not (np.all(np.isfinite(self._lower)) and np.all(np.isfinite(self._upper))
                 and np.all(self._lower <= self._upper) and np.all(np.isfinite(q_init))):
             raise ValueError("joint ranges must be finite with lower <= upper")
-        if not (max_speed > 0 and min_duration > 0 and dwell >= 0 and period > 0):
-            raise ValueError("max_speed, min_duration, period must be > 0 and dwell >= 0")
+        if not (max_speed > 0 and min_duration > 0 and dwell >= 0 and period > 0
+                and confirm_hold >= 0):
+            raise ValueError("max_speed, min_duration, period must be > 0, dwell and "
+                             "confirm_hold >= 0")
         self._n = n
         self._seed = int(seed)
         self._period = float(period)
         self._max_speed = float(max_speed)
         self._min_duration = float(min_duration)
         self._dwell = float(dwell)
+        self._confirm_hold = float(confirm_hold)
         q_init = np.clip(q_init, self._lower, self._upper)
 
         # Start with a first move from the initial posture (segment 0 -> goal 0).
@@ -187,7 +193,9 @@ class MotionGenerator(LeafSystem):
             self._start(x, t, q_now, q_now, x[_PAUSE_LEFT], _HOLD)
         elif x[_KIND] == _MOVE and self._dwell > 0:
             self._start(x, t, q_now, q_now, self._dwell, _HOLD)
-        elif x[_KIND] == _RETURN and x[_CONFIRM_JOINT] >= 0:
+        elif x[_KIND] == _RETURN and self._confirm_hold > 0:
+            self._start(x, t, q_now, q_now, self._confirm_hold, _CONFIRM_REST)
+        elif x[_KIND] in (_RETURN, _CONFIRM_REST) and x[_CONFIRM_JOINT] >= 0:
             goal = self._single_joint_goal(q_now, int(x[_CONFIRM_JOINT]), self._goal(k))
             x[_SEGMENT] = k + 1
             self._start(x, t, q_now, goal, self._move_duration(q_now, goal), _MOVE)
