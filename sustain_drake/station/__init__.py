@@ -4,9 +4,9 @@
 ``build_station(scenario)`` returns the Diagram with the exported ports listed in the README.
 """
 
-from sustain_drake.station.build import EXPORTED_OUTPUTS, build_station
+from sustain_drake.station.build import EXPORTED_OUTPUTS, build_station, camera_info
 from sustain_drake.station.models import models_dir
 from sustain_drake.station.scenario import Scenario, ScenarioError, load_scenario
 
-__all__ = ["EXPORTED_OUTPUTS", "Scenario", "ScenarioError", "build_station", "load_scenario",
-           "models_dir"]
+__all__ = ["EXPORTED_OUTPUTS", "Scenario", "ScenarioError", "build_station", "camera_info",
+           "load_scenario", "models_dir"]

@@ -27,7 +27,7 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import AffineSystem, MatrixGain
-from pydrake.systems.sensors import RgbdSensor
+from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
 from sustain_drake.station.models import make_parser, model_file
 from sustain_drake.station.scenario import (
@@ -146,6 +146,13 @@ class _World:
     def X_HK(self) -> RigidTransform:
         """The sensor frame K (the weld's child frame Jc) in the hand frame H."""
         return self.plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame()
+
+
+def camera_info(scenario: Scenario) -> CameraInfo:
+    """The intrinsics of the scenario's camera (image size, focal lengths, principal point),
+    e.g. for the optical-flow tracker's constructor."""
+    color_camera, _ = scenario.camera.MakeCameras()
+    return color_camera.core().intrinsics()
 
 
 def _deterministic(transform, name: str) -> RigidTransform:
