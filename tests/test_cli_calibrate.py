@@ -157,3 +157,22 @@ def test_console_script_is_installed():
     exe = shutil.which("sustain-drake") or str(Path(sys.executable).parent / "sustain-drake")
     r = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "calibrate" in r.stdout
+
+
+def test_atomic_write_gives_normal_permissions_and_keeps_existing_ones(tmp_path):
+    import os
+    import stat
+
+    from sustain_drake.cli.common import write_atomically
+
+    new = tmp_path / "new.txt"
+    write_atomically(new, "a")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(new.stat().st_mode) == 0o666 & ~mask
+    old = tmp_path / "old.txt"
+    old.write_text("x")
+    old.chmod(0o640)
+    write_atomically(old, b"y")
+    assert old.read_bytes() == b"y" and stat.S_IMODE(old.stat().st_mode) == 0o640
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left
