@@ -7,7 +7,9 @@ output folder: ``replay.html`` (a self-contained Meshcat recording, open it in a
 
 from __future__ import annotations
 
+import importlib
 import io
+import json
 import math
 import sys
 import time
@@ -21,6 +23,7 @@ from pydrake.systems.primitives import LogVectorOutput
 from tqdm import tqdm
 
 from sustain_drake.cli.common import EXIT_OK, CliError, write_atomically
+from sustain_drake.experiments import EXPERIMENTS
 from sustain_drake.station import ScenarioError, build_station, load_scenario
 from sustain_drake.station.meshcat import make_local_meshcat
 from sustain_drake.systems.ground_truth import PoseToVector
@@ -55,6 +58,7 @@ class SimulationResult:
     wall: float  # s
     replay: Path | None
     log: Path
+    metrics: Path | None = None
 
     @property
     def realtime_factor(self) -> float:
@@ -70,6 +74,8 @@ def run(args) -> int:
     if result.replay is not None:
         print(f"replay: {result.replay}")
     print(f"log: {result.log}")
+    if result.metrics is not None:
+        print(f"metrics: {result.metrics}")
     return EXIT_OK
 
 
@@ -109,6 +115,11 @@ def simulate_scenario(scenario_path: Path, duration: float | None = None,
         matrix.set_name(f"{name}_matrix")
         builder.Connect(station.GetOutputPort(name), matrix.get_input_port())
         loggers[name] = LogVectorOutput(matrix.get_output_port(), builder, 1.0 / log_rate)
+    experiments = {}
+    for section, module_name in EXPERIMENTS.items():
+        if getattr(scenario, section).enabled:
+            module = importlib.import_module(module_name)
+            experiments[section] = (module, module.add_to_diagram(builder, station, scenario, meshcat))
     diagram = builder.Build()
 
     simulator = Simulator(diagram)
@@ -138,7 +149,14 @@ def simulate_scenario(scenario_path: Path, duration: float | None = None,
         write_atomically(replay_path, meshcat.StaticHtml())
     log_path = out / "log.npz"
     write_atomically(log_path, _npz_bytes(diagram, simulator, loggers, scenario_path))
-    return SimulationResult(duration, wall, replay_path, log_path)
+    metrics_path = None
+    if experiments:
+        metrics = {"scenario": str(scenario_path), "duration_s": duration, "wall_s": wall}
+        for section, (module, handle) in experiments.items():
+            metrics[section] = module.finish(handle, diagram, simulator.get_context(), out)
+        metrics_path = out / "metrics.json"
+        write_atomically(metrics_path, json.dumps(metrics, indent=2, allow_nan=False) + "\n")
+    return SimulationResult(duration, wall, replay_path, log_path, metrics_path)
 
 
 def _npz_bytes(diagram, simulator, loggers, scenario_path: Path) -> bytes:

@@ -20,6 +20,10 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
 
+from sustain_drake.experiments.body_detection_config import BodyDetectionConfig
+from sustain_drake.experiments.hand_eye_config import HandEyeConfig
+from sustain_drake.experiments.kinesthetic_config import KinestheticConfig
+
 ARM_JOINTS = ("arm_joint1", "arm_joint2", "arm_joint3", "arm_joint4", "arm_joint5")
 HEAD_JOINTS = ("head_pan", "head_tilt")
 TOOL_MODELS = ("rod", "box", "none")
@@ -183,6 +187,10 @@ class Scenario:
     depth_noise: DepthNoiseConfig = field(default_factory=DepthNoiseConfig)
     distractor: DistractorConfig = field(default_factory=DistractorConfig)
     disturbances: list[ToolSlip | HeadMove | Touch] = field(default_factory=list)
+    # The experiments run on this world (``sustain_drake.experiments``); each is off by default.
+    body_detection: BodyDetectionConfig = field(default_factory=BodyDetectionConfig)
+    hand_eye: HandEyeConfig = field(default_factory=HandEyeConfig)
+    kinesthetic: KinestheticConfig = field(default_factory=KinestheticConfig)
 
 
 def load_scenario(filename: str | Path) -> Scenario:

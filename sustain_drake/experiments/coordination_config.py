@@ -1,0 +1,39 @@
+"""The thresholds of an identify <-> observe loop, as a scenario section (no pydrake here)."""
+
+# No "from __future__ import annotations": yaml_load_typed needs the real field types.
+import dataclasses
+
+from sustain_drake.identification.coordination import CoordinationRule
+from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria
+
+
+@dataclasses.dataclass
+class CoordinationConfig:
+    """Convergence criteria (paper §3.1 (a)-(c)) and the observation rule (§4.3).
+
+    ``max_expected_rms`` is in the formulation's residual units (metres for eye-to-hand; m/s^2
+    and N m together for the payload); ``max_ssd`` is ignored by formulations without a
+    rotation.
+    """
+
+    max_expected_rms: float = 0.010
+    min_gap_ratio: float = 10.0
+    max_ssd: float = 0.1
+    min_samples: int = 10
+    forgetting_factor: float = 1.0
+    allowable_error_factor: float = 100.0
+    max_consecutive_violations: int = 10
+    pause_after_convergence: float = 3.0
+
+    def criteria(self, has_rotation: bool = True) -> ConvergenceCriteria:
+        return ConvergenceCriteria(
+            max_expected_rms=self.max_expected_rms, min_gap_ratio=self.min_gap_ratio,
+            max_ssd=self.max_ssd if has_rotation else None, min_samples=self.min_samples,
+        )  # fmt: skip
+
+    def rule(self) -> CoordinationRule:
+        return CoordinationRule(
+            allowable_error_factor=self.allowable_error_factor,
+            max_consecutive_violations=self.max_consecutive_violations,
+            pause_after_convergence=self.pause_after_convergence,
+        )
