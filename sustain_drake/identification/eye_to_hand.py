@@ -33,8 +33,8 @@ from sustain_drake.identification.rotation import project_to_rotation, skew, so3
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     EigenSolution,
+    FormulationIdentifier,
     IdentificationError,
-    SustainableIdentifier,
     Verdict,
     judge,
 )
@@ -280,7 +280,7 @@ def _as_rotation_and_translation(X_WH: np.ndarray):
     return X_WH[:3, :3], X_WH[:3, 3]
 
 
-class EyeToHandIdentifier:
+class EyeToHandIdentifier(FormulationIdentifier):
     """The sustainable identifier with the eye-to-hand formulation: add samples one at a time
     (O(1) memory), solve at any time.
 
@@ -290,28 +290,9 @@ class EyeToHandIdentifier:
     """
 
     def __init__(self, forgetting_factor: float = 1.0, criteria: ConvergenceCriteria | None = None):
-        self._core = SustainableIdentifier(N_UNKNOWNS, forgetting_factor)
-        self.criteria = criteria or default_criteria()
+        super().__init__(N_UNKNOWNS, forgetting_factor, criteria or default_criteria())
         self._A = np.zeros((M_ROWS, N_UNKNOWNS))
         self._T = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
-
-    @property
-    def core(self) -> SustainableIdentifier:
-        return self._core
-
-    @property
-    def num_samples(self) -> int:
-        return self._core.num_samples
-
-    @property
-    def state(self) -> np.ndarray:
-        return self._core.state
-
-    def set_state(self, state: np.ndarray) -> None:
-        self._core.set_state(state)
-
-    def reset(self) -> None:
-        self._core.reset()
 
     def add(self, p_CP: np.ndarray, R_WH: np.ndarray, p_WH: np.ndarray) -> None:
         """Adds one sample: the point measured in the camera frame (m) and the hand pose."""

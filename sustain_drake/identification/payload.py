@@ -34,6 +34,7 @@ from sustain_drake.identification.rotation import skew
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     EigenSolution,
+    FormulationIdentifier,
     SustainableIdentifier,
     Verdict,
     judge,
@@ -98,7 +99,7 @@ class PayloadSolution:
         return 0.0
 
 
-class PayloadIdentifier:
+class PayloadIdentifier(FormulationIdentifier):
     """The sustainable identifier with the static payload formulation.
 
     Args:
@@ -116,27 +117,8 @@ class PayloadIdentifier:
         self.g_W = np.array(gravity_W, dtype=float)
         if self.g_W.shape != (3,) or not np.all(np.isfinite(self.g_W)) or not self.g_W.any():
             raise ValueError(f"gravity_W must be a finite non-zero 3-vector, got {gravity_W}")
-        self._core = SustainableIdentifier(N_UNKNOWNS, forgetting_factor)
-        self.criteria = criteria or default_criteria()
+        super().__init__(N_UNKNOWNS, forgetting_factor, criteria or default_criteria())
         self._A = np.zeros((M_ROWS, N_UNKNOWNS))
-
-    @property
-    def core(self) -> SustainableIdentifier:
-        return self._core
-
-    @property
-    def num_samples(self) -> int:
-        return self._core.num_samples
-
-    @property
-    def state(self) -> np.ndarray:
-        return self._core.state
-
-    def set_state(self, state: np.ndarray) -> None:
-        self._core.set_state(state)
-
-    def reset(self) -> None:
-        self._core.reset()
 
     def add(self, wrench_K: np.ndarray, R_WK: np.ndarray) -> None:
         """Adds one quasi-static sample: the wrench ``[tau_K; f_K]`` and the sensor orientation."""

@@ -310,3 +310,32 @@ class SustainableIdentifier:
         if n <= 0.0:
             raise IdentificationError("no samples to compute a mean squared error from")
         return float(x @ self._S @ x) / n
+
+
+class FormulationIdentifier:
+    """Base of the formulations' identifiers: owns a ``SustainableIdentifier`` (``core``) and
+    forwards its state handling, so a formulation only adds how a sample becomes ``A_t`` and how
+    ``v_N`` is scaled."""
+
+    def __init__(self, num_unknowns: int, forgetting_factor: float, criteria: ConvergenceCriteria):
+        self._core = SustainableIdentifier(num_unknowns, forgetting_factor)
+        self.criteria = criteria
+
+    @property
+    def core(self) -> SustainableIdentifier:
+        return self._core
+
+    @property
+    def num_samples(self) -> int:
+        return self._core.num_samples
+
+    @property
+    def state(self) -> np.ndarray:
+        """The whole state as one flat vector (a copy)."""
+        return self._core.state
+
+    def set_state(self, state: np.ndarray) -> None:
+        self._core.set_state(state)
+
+    def reset(self) -> None:
+        self._core.reset()
