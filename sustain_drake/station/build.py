@@ -40,12 +40,15 @@ from sustain_drake.station.scenario import (
     Touch,
     validate_scenario,
 )
+from sustain_drake.station.touch_plan import touch_postures
 from sustain_drake.systems.camera_sampler import RgbdCameraSampler
+from sustain_drake.systems.contact_truth import ContactTruth
 from sustain_drake.systems.depth_noise import DepthNoiseModel
 from sustain_drake.systems.distractor import DistractorPath
 from sustain_drake.systems.disturbances import DisturbanceScheduler, Push, Step
 from sustain_drake.systems.ground_truth import GroundTruth, PointMass
 from sustain_drake.systems.motion_generator import MotionGenerator
+from sustain_drake.systems.touch_motion import TouchMotion
 from sustain_drake.systems.wrench_sensor import GripperCompensation, WristWrenchSensor
 
 # Where the fixed furniture stands (world frame: origin on the table top, under the arm; the
@@ -72,7 +75,7 @@ EXPORTED_OUTPUTS = (
     "joint_positions", "joint_velocities", "head_joint_positions", "X_WH", "wrench",
     "color_image", "depth_image", "label_image", "image_time",
     "true_X_WC", "true_p_HP", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
-    "true_p_KCo", "true_touch",
+    "true_p_KCo", "true_touch", "true_contact",
 )
 
 
@@ -186,6 +189,7 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
         _add_camera(builder, world.plant, world.scene_graph, scenario, camera_body, X_BS)
     truth = _add_ground_truth(builder, world, camera_body,
                               X_BS @ _deterministic(cam.X_BC, "camera.X_BC"))
+    _add_contact_truth(builder, world)
     if wrench.HasInputPort("X_WK"):
         builder.Connect(truth.GetOutputPort("X_WH"), wrench.GetInputPort("X_WK"))
     if meshcat is not None:
@@ -254,10 +258,46 @@ def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
     y0[n] = scenario.tool.gripper_position
     arm_desired = builder.AddSystem(AffineSystem(D=D, y0=y0))
     arm_desired.set_name("arm_desired_state")
-    builder.Connect(motion.get_output_port(), arm_desired.get_input_port())
+    builder.Connect(_add_touch_motion(builder, world, scenario, motion.get_output_port()),
+                    arm_desired.get_input_port())
     builder.Connect(arm_desired.get_output_port(), plant.get_desired_state_input_port(world.arm))
     builder.ExportInput(motion.GetInputPort("pause"), "motion_pause")
     builder.ExportInput(motion.GetInputPort("confirm"), "motion_confirm")
+
+
+def _add_touch_motion(builder, world: _World, scenario: Scenario, babble):
+    """With ``touch_motion`` enabled, the touching program sits between the babbling and the
+    arm (inputs ``touch_start``, ``touch_feedback``; output ``touch_phase``). Returns the port
+    that drives the arm."""
+    tm = scenario.touch_motion
+    if not tm.enabled:
+        return babble
+    postures = touch_postures(world.plant, world.tool_body, tm, X_W_TABLE.translation()[2],
+                              world.posture)
+    descent = tm.approach_height + tm.press_depth
+    touch = builder.AddSystem(TouchMotion(
+        postures, descend_duration=descent / tm.descend_speed, keep_touching=tm.keep_touching,
+        press_extra=tm.press_extra / descent, max_speed=tm.max_speed,
+        start_delay=tm.start_delay, repeat=tm.repeat, period=scenario.motion.period))
+    touch.set_name("touch_motion")
+    builder.Connect(babble, touch.GetInputPort("babble_state"))
+    builder.ExportInput(touch.GetInputPort("start"), "touch_start")
+    builder.ExportInput(touch.GetInputPort("touch"), "touch_feedback")
+    builder.ExportOutput(touch.GetOutputPort("phase"), "touch_phase")
+    return touch.GetOutputPort("desired_state")
+
+
+def _add_contact_truth(builder, world: _World) -> None:
+    """``true_contact``: the real contacts on the held tool (zeros without a tool)."""
+    plant = world.plant
+    bodies = [] if world.tool_body is None else [world.tool_body.index()]
+    geometries = [g.get_value() for b in bodies
+                  for g in plant.GetCollisionGeometriesForBody(plant.get_body(b))]
+    truth = builder.AddSystem(ContactTruth(bodies, geometries))
+    truth.set_name("contact_truth")
+    builder.Connect(plant.get_contact_results_output_port(),
+                    truth.GetInputPort("contact_results"))
+    builder.ExportOutput(truth.GetOutputPort("true_contact"), "true_contact")
 
 
 def _add_disturbances(builder, world: _World, scenario: Scenario) -> None:

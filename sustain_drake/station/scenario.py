@@ -174,6 +174,41 @@ Disturbance = ToolSlip | HeadMove | Touch
 
 
 @dataclasses.dataclass
+class TouchTarget:
+    """A real touch of the table with the held tool: the tool's point ``p_TQ`` (m, tool frame T,
+    e.g. a corner or a face centre) goes down on the table top at ``p_WQ`` = [x, y] (m, world),
+    with the tool oriented so that its direction ``down_T`` (tool frame; a face's outward
+    normal to touch flat with that face, a corner's diagonal to touch with the corner) points
+    straight down."""
+
+    p_TQ: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.12])
+    down_T: list[float] = field(default_factory=lambda: [0.0, 0.0, 1.0])
+    p_WQ: list[float] = field(default_factory=lambda: [0.3, 0.0])
+
+
+@dataclasses.dataclass
+class TouchMotionConfig:
+    """Touching the table after the identification (paper §4.4), with the "keep touching" rule.
+
+    When enabled, the station has the inputs ``touch_start`` (start the touches when > 0.5,
+    e.g. the coordination mode OBSERVE) and ``touch_feedback`` (a touch estimator's flag), and
+    the output ``touch_phase`` (see ``TouchMotion``). Each target's postures are solved by
+    inverse kinematics when the station is built.
+    """
+
+    enabled: bool = False
+    targets: list[TouchTarget] = field(default_factory=list)
+    approach_height: float = 0.03  # m above the table where the descent starts
+    press_depth: float = 0.02  # m below the table top where the descent would end
+    descend_speed: float = 0.01  # m/s of the touching point (nearly quasi-static)
+    press_extra: float = 0.004  # m pressed on beyond where the touch was felt
+    keep_touching: float = 2.0  # s the touch is kept once felt
+    start_delay: float = 3.0  # s after touch_start rises (the pause after identification)
+    max_speed: float = 0.5  # rad/s peak joint speed of the moves between touches
+    repeat: bool = True  # start again with the first target after the last
+
+
+@dataclasses.dataclass
 class Scenario:
     """One simulated experiment. ``duration`` is the default length of ``simulate``."""
 
@@ -187,6 +222,7 @@ class Scenario:
     depth_noise: DepthNoiseConfig = field(default_factory=DepthNoiseConfig)
     distractor: DistractorConfig = field(default_factory=DistractorConfig)
     disturbances: list[ToolSlip | HeadMove | Touch] = field(default_factory=list)
+    touch_motion: TouchMotionConfig = field(default_factory=TouchMotionConfig)
     # The experiments run on this world (``sustain_drake.experiments``); each is off by default.
     body_detection: BodyDetectionConfig = field(default_factory=BodyDetectionConfig)
     hand_eye: HandEyeConfig = field(default_factory=HandEyeConfig)
@@ -296,3 +332,19 @@ def validate_scenario(s: Scenario) -> None:
             _check(s.tool.model != "none", f"{name}: there is no tool to slip")
         else:
             _finite([e.pan, e.tilt], name)
+    tm = s.touch_motion
+    if tm.enabled:
+        _check(s.tool.model != "none", "touch_motion: there is no tool to touch with")
+        _check(len(tm.targets) > 0, "touch_motion.targets: at least one target is needed")
+        for i, g in enumerate(tm.targets):
+            _check(len(g.p_TQ) == 3 and len(g.down_T) == 3 and len(g.p_WQ) == 2,
+                   f"touch_motion.targets[{i}]: p_TQ and down_T need 3 numbers, p_WQ 2")
+            _finite(list(g.p_TQ) + list(g.down_T) + list(g.p_WQ), f"touch_motion.targets[{i}]")
+            _check(any(g.down_T), f"touch_motion.targets[{i}]: down_T must not be zero")
+        _finite([tm.approach_height, tm.press_depth, tm.descend_speed, tm.press_extra,
+                 tm.keep_touching, tm.start_delay, tm.max_speed], "touch_motion values")
+        _check(tm.approach_height > 0 and tm.press_depth > 0 and tm.descend_speed > 0
+               and tm.max_speed > 0 and tm.keep_touching >= 0 and tm.start_delay >= 0
+               and 0 <= tm.press_extra <= tm.approach_height + tm.press_depth,
+               "touch_motion: heights, speeds must be > 0, times >= 0, press_extra within the "
+               "descent")

@@ -1,0 +1,246 @@
+"""Kinesthetic coordination (paper §3.5, §4.4): the held object's mass and centre of mass from the
+wrist wrench, decided by the identify <-> observe loop, then touches estimated on it.
+
+The loop: ``QuasiStaticGate`` (joint encoders, touch flag) -> ``sample_valid`` of a
+``SustainableIdentifierSystem`` with the ``PayloadFormulation`` (station ``wrench`` and the sensor
+pose ``X_WH``, K = H) <-> ``CoordinationStateMachine`` (convergence and the observation rule from
+the scenario's ``CoordinationConfig``, exactly as for hand-eye); its ``pause`` pauses the
+babbling after convergence. The adopted payload and allowable error go to a ``TouchEstimator``
+whose shape is the held tool's collision geometry, read from the SceneGraph. Its touch flag feeds
+the station's touching program (the "keep touching" rule) and keeps touched samples out of the
+identifier (see ``QuasiStaticGate``); the mode (OBSERVE) starts the touching program.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
+
+from sustain_drake.cli.common import write_atomically
+from sustain_drake.identification import coordination
+from sustain_drake.station.build import HAND_BODY, SENSOR_JOINT
+from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
+from sustain_drake.systems.quasi_static_gate import QuasiStaticGate
+from sustain_drake.systems.sustainable_identifier_system import PayloadFormulation, SustainableIdentifierSystem
+from sustain_drake.systems.touch_estimator import TouchEstimator
+
+
+@dataclass
+class KinestheticHandle:
+    """What ``finish`` needs: the systems and their loggers."""
+
+    identifier: SustainableIdentifierSystem
+    state_machine: CoordinationStateMachine
+    estimator: TouchEstimator
+    loggers: dict[str, VectorLogSink]
+    eval_min_force: float
+
+
+def held_shape(station):
+    """The held tool's collision shape (a ``pydrake.geometry`` shape) and its pose ``X_KG`` in the
+    sensor frame K at the nominal grasp, from the station's plant and SceneGraph."""
+    plant = station.GetSubsystemByName("plant")
+    inspector = station.GetSubsystemByName("scene_graph").model_inspector()
+    tool = plant.GetBodyByName("tool")
+    geometries = plant.GetCollisionGeometriesForBody(tool)
+    if len(geometries) != 1:
+        raise ValueError(f"the held tool needs exactly one collision geometry, it has {len(geometries)}")
+    context = plant.CreateDefaultContext()
+    X_WK = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName(HAND_BODY)) @ (
+        plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame())
+    X_KG = X_WK.inverse() @ plant.EvalBodyPoseInWorld(context, tool) @ inspector.GetPoseInFrame(geometries[0])
+    return inspector.GetShape(geometries[0]), RigidTransform(X_KG)
+
+
+def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> KinestheticHandle:
+    config = scenario.kinesthetic
+    c, qs = config.coordination, config.quasi_static
+    if scenario.tool.model == "none":
+        raise ValueError("kinesthetic: the scenario holds no tool")
+    ident = builder.AddSystem(SustainableIdentifierSystem(
+        PayloadFormulation(criteria=c.criteria(has_rotation=False), forgetting_factor=c.forgetting_factor),
+        period=config.period))  # fmt: skip
+    ident.set_name("payload_identifier")
+    sm = builder.AddSystem(CoordinationStateMachine(PayloadFormulation.num_unknowns, c.rule(), config.period))
+    sm.set_name("payload_coordination")
+    gate = builder.AddSystem(QuasiStaticGate(
+        5, config.period, qs.max_joint_speed, qs.max_joint_acceleration, qs.window, qs.touch_holdoff,
+        qs.max_touch_duration))  # fmt: skip
+    gate.set_name("quasi_static_gate")
+    shape, X_KG = held_shape(station)
+    estimator = builder.AddSystem(TouchEstimator(shape, X_KG, min_force=config.min_touch_force))
+    estimator.set_name("touch_estimator")
+
+    wrench, X_WK = station.GetOutputPort("wrench"), station.GetOutputPort("X_WH")  # K = H
+    for system in (ident, estimator):
+        builder.Connect(wrench, system.GetInputPort("wrench"))
+        builder.Connect(X_WK, system.GetInputPort("X_WK"))
+    builder.Connect(station.GetOutputPort("joint_velocities"), gate.GetInputPort("joint_velocities"))
+    builder.Connect(estimator.GetOutputPort("touch"), gate.GetInputPort("touch"))
+    builder.Connect(gate.GetOutputPort("sample_valid"), ident.GetInputPort("sample_valid"))
+    builder.Connect(ident.GetOutputPort("solution"), sm.GetInputPort("solution"))
+    builder.Connect(ident.GetOutputPort("observation"), sm.GetInputPort("observation"))
+    builder.Connect(sm.GetOutputPort("adopted_x"), ident.GetInputPort("reference_x"))
+    builder.Connect(sm.GetOutputPort("reset"), ident.GetInputPort("reset"))
+    builder.Connect(sm.GetOutputPort("adopted_solution"), estimator.GetInputPort("payload"))
+    builder.Connect(sm.GetOutputPort("allowable_error"), estimator.GetInputPort("allowable_error"))
+    builder.Connect(sm.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
+    if station.HasInputPort("touch_start"):
+        builder.Connect(sm.GetOutputPort("mode"), station.GetInputPort("touch_start"))
+        builder.Connect(estimator.GetOutputPort("touch"), station.GetInputPort("touch_feedback"))
+
+    period = config.period
+    sources = {
+        "eigenvalues": ident.GetOutputPort("eigenvalues"), "mode": sm.GetOutputPort("mode"),
+        "sample_valid": gate.GetOutputPort("sample_valid"), "touch": estimator.GetOutputPort("touch"),
+        "p_WP": estimator.GetOutputPort("p_WP"), "f_env_W": estimator.GetOutputPort("f_env_W"),
+        "true_contact": station.GetOutputPort("true_contact"),
+        "true_tool_mass": station.GetOutputPort("true_tool_mass"),
+        "true_p_KCm": station.GetOutputPort("true_p_KCm"),
+        "true_touch": station.GetOutputPort("true_touch"),
+    }  # fmt: skip
+    if station.HasOutputPort("touch_phase"):
+        sources["touch_phase"] = station.GetOutputPort("touch_phase")
+    loggers = {name: LogVectorOutput(port, builder, period) for name, port in sources.items()}
+    return KinestheticHandle(ident, sm, estimator, loggers, config.eval_min_force)
+
+
+def _logs(handle: KinestheticHandle, context):
+    out = {}
+    for name, logger in handle.loggers.items():
+        log = logger.FindLog(context)
+        out.setdefault("time", log.sample_times())
+        out[name] = log.data().T
+    return out
+
+
+def touch_errors(logs: dict, min_force: float) -> dict:
+    """Touch-point errors (mm) where the estimator declares a touch and the true contact force
+    is at least ``min_force``; false touches (declared with no real or applied contact) and
+    strong contacts missed, in samples."""
+    touch = logs["touch"][:, 0] > 0.5
+    truth = logs["true_contact"]
+    contact = truth[:, 0] > 0.5
+    strong = contact & (np.linalg.norm(truth[:, 4:7], axis=1) >= min_force)
+    pushed = logs["true_touch"][:, 0] > 0.5  # applied (finger) forces are not contacts
+    scored = touch & strong
+    errors = 1000.0 * np.linalg.norm(logs["p_WP"][scored] - truth[scored, 1:4], axis=1)
+    return {
+        "samples_scored": int(scored.sum()),
+        "median_mm": float(np.median(errors)) if errors.size else None,
+        "max_mm": float(np.max(errors)) if errors.size else None,
+        "p90_mm": float(np.percentile(errors, 90)) if errors.size else None,
+        "false_touch_samples": int((touch & ~contact & ~pushed).sum()),
+        "missed_strong_contact_samples": int((strong & ~touch).sum()),
+        "strong_contact_samples": int(strong.sum()),
+    }
+
+
+def finish(handle: KinestheticHandle, diagram, context, out_dir) -> dict:
+    out_dir = Path(out_dir)
+    sm_context = handle.state_machine.GetMyContextFromRoot(context)
+    events = handle.state_machine.events(sm_context)
+    logs = _logs(handle, context)
+    t = logs["time"]
+    converged = [e for e in events if e.kind == coordination.CONVERGED]
+    metrics = {
+        "events": [{"time_s": e.time, "kind": e.kind, "detail": e.detail} for e in events],
+        "identification_time_s": converged[0].time if converged else None,
+        "change_detections": sum(e.kind == coordination.CHANGE_DETECTED for e in events),
+    }
+    adopted = handle.state_machine.GetOutputPort("adopted_solution").Eval(sm_context)
+    final = handle.identifier.solution(handle.identifier.GetMyContextFromRoot(context))
+    if converged and adopted is not None:
+        k = min(int(np.searchsorted(t, converged[0].time)), t.size - 1)
+        m_true, p_true = float(logs["true_tool_mass"][k, 0]), logs["true_p_KCm"][k]
+        metrics.update({
+            "mass_kg": adopted.mass, "true_mass_kg": m_true,
+            "mass_error_percent": 100.0 * abs(adopted.mass - m_true) / m_true,
+            "p_KCm_m": adopted.p_KCm.tolist(), "true_p_KCm_m": p_true.tolist(),
+            "com_error_mm": 1000.0 * float(np.linalg.norm(adopted.p_KCm - p_true)),
+            "samples_at_convergence": adopted.num_samples,
+            "allowable_error": float(handle.state_machine.GetOutputPort("allowable_error").Eval(sm_context)[0]),
+        })  # fmt: skip
+    metrics["final_estimate"] = {
+        "converged": final.verdict.converged, "reason": final.verdict.reason, "samples": final.num_samples,
+        "mass_kg": final.mass, "p_KCm_m": final.p_KCm.tolist(),
+    }  # fmt: skip
+    metrics["touch"] = touch_errors(logs, handle.eval_min_force)
+    if "touch_phase" in logs:
+        metrics["touch"]["touches_felt"] = int(logs["touch_phase"][-1, 2])
+        metrics["touch"]["touches_missed"] = int(logs["touch_phase"][-1, 3])
+    metrics["quasi_static_fraction"] = float(np.mean(logs["sample_valid"][:, 0] > 0.5))
+    _plot(logs, converged[0].time if converged else None, handle.eval_min_force, out_dir)
+    metrics["figures"] = ["kinesthetic_eigenvalues.png", "kinesthetic_touch_points.png"]
+    return _finite(metrics)
+
+
+def _finite(value):
+    """JSON has no NaN or infinity: such numbers become None."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _plot(logs, t_converged, min_force, out_dir: Path) -> None:
+    """Fig. 11 of the paper: (A) lambda_2..lambda_5 over time; (B) the touch points in 3-D and
+    (b) projected on y-z."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = logs["time"]
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for i in range(1, 5):
+        ax.semilogy(t, np.maximum(logs["eigenvalues"][:, i], 1e-12), label=f"$\\lambda_{i + 1}$")
+    if t_converged is not None:
+        ax.axvline(t_converged, color="k", ls="--", lw=1, label=f"identified {t_converged:.1f} s")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("eigenvalue (conditioned)")
+    ax.set_title("(A) payload identification reliability")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    _save(fig, out_dir / "kinesthetic_eigenvalues.png")
+    plt.close(fig)
+
+    touch = logs["touch"][:, 0] > 0.5
+    truth = logs["true_contact"]
+    strong = (truth[:, 0] > 0.5) & (np.linalg.norm(truth[:, 4:7], axis=1) >= min_force)
+    est, true = logs["p_WP"][touch], truth[strong, 1:4]
+    fig = plt.figure(figsize=(10, 4.5))
+    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
+    ax3.scatter(*true.T, s=4, c="k", label=f"true contact (>= {min_force:g} N)")
+    ax3.scatter(*est.T, s=4, c="r", label="estimated touch")
+    ax3.set_xlabel("x [m]")
+    ax3.set_ylabel("y [m]")
+    ax3.set_zlabel("z [m]")
+    ax3.set_title("(B) touch points")
+    ax3.legend(fontsize=8)
+    ax2 = fig.add_subplot(1, 2, 2)
+    ax2.scatter(true[:, 1], true[:, 2], s=4, c="k", label="true")
+    ax2.scatter(est[:, 1], est[:, 2], s=4, c="r", label="estimated")
+    ax2.set_xlabel("y [m]")
+    ax2.set_ylabel("z [m]")
+    ax2.set_title("(b) projected on y-z (table top: z = 0)")
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    _save(fig, out_dir / "kinesthetic_touch_points.png")
+    plt.close(fig)
+
+
+def _save(fig, path: Path) -> None:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    write_atomically(path, buffer.getvalue())
