@@ -142,3 +142,18 @@ def test_loop_converges_detects_a_slip_and_reconverges():
     assert np.linalg.norm(new.p_HP - (truth.p_HP + [0.03, -0.02, 0.01])) < 5e-3
     assert len(sm.events(sm.GetMyContextFromRoot(clone))) == 1
     assert sm.GetOutputPort("pause").Eval(sm_context)[0] == 2  # one pause request per convergence
+
+
+def test_a_stale_solution_after_a_detection_is_not_adopted():
+    # The identifier applies the reset one update after the detection: the solution seen on the
+    # next tick is still the old converged one (500 samples), and must not be adopted again.
+    over = 2e-4
+    state, events = run_rule([(True, 1e-6, 2 + k, over) for k in range(10)], observing_state())
+    assert [e.kind for e in events] == [coordination.CHANGE_DETECTED]
+    detected_at = 11
+    for k in range(1, 4):
+        state, event = coordination.step(state, RULE, 2.0 + k, True, 1e-6, detected_at + k, 0.0, 500)
+        assert event is None and state[coordination.MODE] == coordination.IDENTIFY
+    # A fresh solution (its samples all came after the detection) is adopted.
+    state, event = coordination.step(state, RULE, 6.0, True, 1e-6, detected_at + 20, 0.0, 12)
+    assert event.kind == coordination.CONVERGED and state[coordination.MODE] == coordination.OBSERVE

@@ -56,8 +56,8 @@ class CoordinationRule:
 
 
 # Layout of the state vector.
-MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS = range(8)
-STATE_SIZE = 8
+MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE = range(9)
+STATE_SIZE = 9
 
 
 def initial_state() -> np.ndarray:
@@ -84,6 +84,7 @@ def step(
     expected_mse: float,
     sample_count: int,
     sample_error: float,
+    num_samples: int | None = None,
 ) -> tuple[np.ndarray, Event | None]:
     """One tick of the rule. Returns the new state (a copy) and the event it decided, if any.
 
@@ -96,12 +97,17 @@ def step(
         sample_count: how many valid samples the identifier has seen in all (a new sample is a
             change of this count).
         sample_error: ``s_t`` of the newest sample under the ADOPTED estimate (OBSERVE only).
+        num_samples: the samples behind the identifier's solution, if known. After a change
+            detection the identifier applies the reset one update later, so for a tick or two it
+            still shows the old (converged) solution; a solution is only taken as the new
+            identification when it has no more samples than arrived since the detection.
     """
     new = state.copy()
     new_sample = sample_count != int(state[LAST_SAMPLE])
     new[LAST_SAMPLE] = sample_count
     if int(state[MODE]) == IDENTIFY:
-        if converged and math.isfinite(expected_mse):
+        stale = num_samples is not None and num_samples > sample_count - state[RESET_SAMPLE]
+        if converged and math.isfinite(expected_mse) and not stale:
             new[MODE] = OBSERVE
             new[VIOLATIONS] = 0
             new[SIGMA] = rule.allowable_error_factor * max(expected_mse, 0.0)
@@ -120,5 +126,6 @@ def step(
         new[VIOLATIONS] = 0
         new[RESET_COUNT] += 1
         new[DETECTIONS] += 1
+        new[RESET_SAMPLE] = sample_count
         return new, Event(time, CHANGE_DETECTED, f"{rule.max_consecutive_violations} samples over the limit")
     return new, None

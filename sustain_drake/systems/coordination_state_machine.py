@@ -101,7 +101,7 @@ class CoordinationStateMachine(LeafSystem):
         sample_count, sample_error = self._observation.Eval(context)
         new, event = coordination.step(
             self._vector(context), self._rule, context.get_time(), solution.verdict.converged,
-            solution.expected_mse, int(sample_count), float(sample_error),
+            solution.expected_mse, int(sample_count), float(sample_error), int(solution.num_samples),
         )  # fmt: skip
         state.get_mutable_discrete_state(self._state).set_value(new)
         if event is not None:

@@ -199,21 +199,11 @@ class SustainableIdentifierSystem(LeafSystem):
         self._solution = self.DeclareAbstractState(AbstractValue.Make(formulation.solve(empty)))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
-        state = {self.all_state_ticket()}
-        self.DeclareVectorOutputPort("eigenvalues", n, self._calc_eigenvalues, prerequisites_of_calc=state)
-        self.DeclareVectorOutputPort("x", n, self._calc_x, prerequisites_of_calc=state)
-        self.DeclareVectorOutputPort(
-            "ssd", 1, lambda c, o: o.SetAtIndex(0, _finite(self.solution(c).ssd)), prerequisites_of_calc=state
-        )
-        self.DeclareVectorOutputPort("verdict", 2, self._calc_verdict, prerequisites_of_calc=state)
-        self.DeclareVectorOutputPort(
-            "expected_mse", 1, lambda c, o: o.SetAtIndex(0, _finite(self.solution(c).expected_mse)),
-            prerequisites_of_calc=state,
-        )  # fmt: skip
+        declare_solution_outputs(self, n, self.solution)
         self.DeclareVectorOutputPort(
             "observation", 2,
             lambda c, o: o.SetFromVector(c.get_discrete_state(self._book).value()[_SAMPLE_COUNT:]),
-            prerequisites_of_calc=state,
+            prerequisites_of_calc={self.all_state_ticket()},
         )  # fmt: skip
         self.DeclareStateOutputPort("solution", self._solution)
         formulation.declare_outputs(self, self.solution)
@@ -253,15 +243,33 @@ class SustainableIdentifierSystem(LeafSystem):
         state.get_mutable_discrete_state(self._book).set_value(book)
         state.get_mutable_abstract_state(self._solution).set_value(self._formulation.solve(identifier))
 
-    def _calc_eigenvalues(self, context, output) -> None:
-        output.SetFromVector(self.solution(context).eigenvalues)
 
-    def _calc_x(self, context, output) -> None:
-        output.SetFromVector(self.solution(context).x)
 
-    def _calc_verdict(self, context, output: BasicVector) -> None:
-        solution = self.solution(context)
+def declare_solution_outputs(system: LeafSystem, n: int, solution_of) -> None:
+    """Declares ``eigenvalues`` (n), ``x`` (n), ``ssd`` (1), ``verdict`` (2: ``[converged 0/1,
+    num_samples]``) and ``expected_mse`` (1) on ``system``, computed from ``solution_of(context)``
+    (a solution held in the system's state). Shared by the identifier systems."""
+    state = {system.all_state_ticket()}
+
+    def calc_verdict(context, output: BasicVector) -> None:
+        solution = solution_of(context)
         output.SetFromVector([1.0 if solution.verdict.converged else 0.0, solution.num_samples])
+
+    system.DeclareVectorOutputPort(
+        "eigenvalues", n, lambda c, o: o.SetFromVector(solution_of(c).eigenvalues),
+        prerequisites_of_calc=state,
+    )  # fmt: skip
+    system.DeclareVectorOutputPort(
+        "x", n, lambda c, o: o.SetFromVector(solution_of(c).x), prerequisites_of_calc=state
+    )
+    system.DeclareVectorOutputPort(
+        "ssd", 1, lambda c, o: o.SetAtIndex(0, _finite(solution_of(c).ssd)), prerequisites_of_calc=state
+    )
+    system.DeclareVectorOutputPort("verdict", 2, calc_verdict, prerequisites_of_calc=state)
+    system.DeclareVectorOutputPort(
+        "expected_mse", 1, lambda c, o: o.SetAtIndex(0, _finite(solution_of(c).expected_mse)),
+        prerequisites_of_calc=state,
+    )  # fmt: skip
 
 
 def _finite(value: float) -> float:

@@ -1,0 +1,317 @@
+"""Sustainable marker-free hand-eye coordination (paper §3.4, §4.3, Figs. 7 and 9).
+
+The loop, from images only (no ground truth inside it)::
+
+    station color/depth -> OpticalFlowTracker -> MotionCoincidenceDetector (confirm -> motion_confirm)
+        tracked_features + feature_on_body + X_WH -> CandidateIdentifiers -> CoordinationStateMachine
+        state machine: adopted_x -> reference_x, reset -> reset, pause -> motion_pause
+
+``finish`` evaluates against the station's ground truth (``true_X_WC``, ``true_p_HP``, logged
+beside the loop): the time of each convergence and each detection, the error of each adopted
+estimate, the latencies after each disturbance, false alarms; it draws Fig. 9-like plots.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import Cylinder, Rgba, Sphere
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.systems.framework import LeafSystem
+from pydrake.systems.primitives import LogVectorOutput
+
+from sustain_drake.cli.common import write_atomically
+from sustain_drake.identification import coordination
+from sustain_drake.identification.candidates import best_p_HP_given_camera
+from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
+from sustain_drake.identification.rotation import rotation_angle
+from sustain_drake.station import camera_info
+from sustain_drake.station.scenario import ARM_JOINTS, HeadMove, ToolSlip
+from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
+from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
+from sustain_drake.systems.ground_truth import PoseToVector
+from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
+from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
+from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation
+
+# Logged signals: (system key, output port).
+_LOGGED = (("candidates", "eigenvalues"), ("candidates", "ssd"), ("candidates", "observation"),
+           ("candidates", "expected_mse"), ("state_machine", "mode"), ("state_machine", "allowable_error"),
+           ("station", "true_p_HP"))
+_POSES = ("true_X_WC", "X_WH")
+
+
+@dataclass
+class HandEyeHandle:
+    scenario: object
+    tracker: OpticalFlowTracker
+    detector: MotionCoincidenceDetector
+    candidates: CandidateIdentifiers
+    state_machine: CoordinationStateMachine
+    loggers: dict
+
+
+def build_loop(builder, station, scenario):
+    """Adds tracker, detector, candidates and state machine wired to ``station`` (its image,
+    encoder, ``X_WH`` outputs and ``motion_confirm``/``motion_pause`` inputs). Returns them."""
+    config = scenario.hand_eye
+    period = 1.0 / scenario.camera.fps
+    tracker = builder.AddSystem(OpticalFlowTracker(camera_info(scenario), period=period))
+    detector = builder.AddSystem(
+        MotionCoincidenceDetector(len(ARM_JOINTS), tracker.grid.num_cells, period=period))
+    formulation = EyeToHandFormulation(config.coordination.criteria(), config.coordination.forgetting_factor)
+    candidates = builder.AddSystem(CandidateIdentifiers(formulation, config.candidates.params(), period))
+    machine = builder.AddSystem(CoordinationStateMachine(16, config.coordination.rule(), period))
+    for name in ("color_image", "depth_image", "image_time"):
+        builder.Connect(station.GetOutputPort(name), tracker.GetInputPort(name))
+    builder.Connect(station.GetOutputPort("joint_positions"), detector.GetInputPort("actuator_positions"))
+    builder.Connect(tracker.GetOutputPort("visual_change"), detector.GetInputPort("visual_change"))
+    builder.Connect(tracker.GetOutputPort("tracked_features"), detector.GetInputPort("tracked_features"))
+    builder.Connect(detector.GetOutputPort("confirm"), station.GetInputPort("motion_confirm"))
+    builder.Connect(tracker.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
+    builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
+    builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
+    builder.Connect(candidates.GetOutputPort("solution"), machine.GetInputPort("solution"))
+    builder.Connect(candidates.GetOutputPort("observation"), machine.GetInputPort("observation"))
+    builder.Connect(machine.GetOutputPort("adopted_x"), candidates.GetInputPort("reference_x"))
+    builder.Connect(machine.GetOutputPort("reset"), candidates.GetInputPort("reset"))
+    builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
+    return tracker, detector, candidates, machine
+
+
+def add_to_diagram(builder, station, scenario, meshcat) -> HandEyeHandle:
+    tracker, detector, candidates, machine = build_loop(builder, station, scenario)
+    period = 1.0 / scenario.hand_eye.log_rate
+    systems = {"candidates": candidates, "state_machine": machine, "station": station}
+    loggers = {port: LogVectorOutput(systems[key].GetOutputPort(port), builder, period)
+               for key, port in _LOGGED}
+    for name in _POSES:
+        matrix = builder.AddSystem(PoseToVector())
+        matrix.set_name(f"hand_eye_{name}_matrix")
+        builder.Connect(station.GetOutputPort(name), matrix.get_input_port())
+        loggers[name] = LogVectorOutput(matrix.get_output_port(), builder, period)
+    if meshcat is not None:
+        viz = builder.AddSystem(EstimateVisualizer(meshcat))
+        builder.Connect(machine.GetOutputPort("adopted_solution"), viz.GetInputPort("adopted_solution"))
+        builder.Connect(machine.GetOutputPort("mode"), viz.GetInputPort("mode"))
+        for name in ("X_WH", "true_X_WC", "true_p_HP"):
+            builder.Connect(station.GetOutputPort(name), viz.GetInputPort(name))
+    return HandEyeHandle(scenario, tracker, detector, candidates, machine, loggers)
+
+
+class EstimateVisualizer(LeafSystem):
+    """Shows the adopted camera frame and tracked point beside the true ones in Meshcat (and in
+    its recording): a side effect, so a periodic publish event.
+
+    .. pydrake_system::
+
+        name: EstimateVisualizer
+        input_ports:
+        - adopted_solution
+        - mode
+        - X_WH
+        - true_X_WC
+        - true_p_HP
+
+    Paths under ``/hand_eye``: ``estimated_camera`` (a triad, hidden before an adoption),
+    ``true_camera`` (a thinner, paler triad), ``estimated_point`` (an orange sphere at
+    ``X_WH p_HP`` of the adopted estimate; green while observing, orange while identifying)
+    and ``true_point`` (a small white sphere at the true rod tip). Evaluation display only.
+    """
+
+    def __init__(self, meshcat, period: float = 1.0 / 15.0, prefix: str = "/hand_eye"):
+        super().__init__()
+        self._meshcat, self._prefix = meshcat, prefix
+        self._solution = self.DeclareAbstractInputPort("adopted_solution", AbstractValue.Make(object()))
+        self._mode = self.DeclareVectorInputPort("mode", 1)
+        self._X_WH = self.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform()))
+        self._X_WC = self.DeclareAbstractInputPort("true_X_WC", AbstractValue.Make(RigidTransform()))
+        self._p_HP = self.DeclareVectorInputPort("true_p_HP", 3)
+        _triad(meshcat, f"{prefix}/estimated_camera", 0.12, 0.004, 1.0)
+        _triad(meshcat, f"{prefix}/true_camera", 0.08, 0.002, 0.4)
+        meshcat.SetObject(f"{prefix}/estimated_point", Sphere(0.012), Rgba(1.0, 0.5, 0.0, 0.9))
+        meshcat.SetObject(f"{prefix}/true_point", Sphere(0.006), Rgba(1.0, 1.0, 1.0, 1.0))
+        self.DeclarePeriodicPublishEvent(period, 0.0, self._publish)
+
+    def _publish(self, context) -> None:
+        t = context.get_time()
+        meshcat, prefix = self._meshcat, self._prefix
+        X_WH = self._X_WH.Eval(context)
+        meshcat.SetTransform(f"{prefix}/true_camera", self._X_WC.Eval(context), t)
+        meshcat.SetTransform(f"{prefix}/true_point", RigidTransform(X_WH @ self._p_HP.Eval(context)), t)
+        solution = self._solution.Eval(context)
+        estimate = getattr(solution, "estimate", None)
+        shown = estimate is not None
+        for name in ("estimated_camera", "estimated_point"):
+            meshcat.SetProperty(f"{prefix}/{name}", "visible", shown, t)
+        if shown:
+            meshcat.SetTransform(f"{prefix}/estimated_camera",
+                                 RigidTransform(RotationMatrix(estimate.R_WC), estimate.p_WC), t)
+            meshcat.SetTransform(f"{prefix}/estimated_point", RigidTransform(X_WH @ estimate.p_HP), t)
+            observing = self._mode.Eval(context)[0] == coordination.OBSERVE
+            color = [0.1, 0.8, 0.2, 0.9] if observing else [1.0, 0.5, 0.0, 0.9]
+            meshcat.SetProperty(f"{prefix}/estimated_point/<object>", "color", color, t)
+
+
+def _triad(meshcat, path: str, length: float, radius: float, opacity: float) -> None:
+    """Red x, green y, blue z axes as cylinders (Meshcat has no triad primitive)."""
+    axes = {"x": (RotationMatrix.MakeYRotation(math.pi / 2), [1, 0, 0]),
+            "y": (RotationMatrix.MakeXRotation(-math.pi / 2), [0, 1, 0]),
+            "z": (RotationMatrix(), [0, 0, 1])}
+    for name, (R, color) in axes.items():
+        meshcat.SetObject(f"{path}/{name}", Cylinder(radius, length), Rgba(*color, opacity))
+        meshcat.SetTransform(f"{path}/{name}", RigidTransform(R, R.matrix()[:, 2] * length / 2))
+
+
+# ---- evaluation ------------------------------------------------------------------------------
+def _disturbances(scenario) -> list[dict]:
+    out = []
+    for d in scenario.disturbances:
+        if isinstance(d, ToolSlip):
+            out.append({"kind": "tool_slip", "time_s": d.time})
+        elif isinstance(d, HeadMove):
+            out.append({"kind": "head_move", "time_s": d.time})
+    return sorted(out, key=lambda d: d["time_s"])
+
+
+def _log(handle, diagram, context, name):
+    log = handle.loggers[name].FindLog(context)
+    return log.sample_times(), log.data().T
+
+
+def _at(times, data, t):
+    return data[min(int(np.searchsorted(times, t - 1e-9)), len(times) - 1)]
+
+
+def evaluate(handle, diagram, context) -> dict:
+    """The metrics of a run (see the module docstring); pure reading of logs and states."""
+    scenario, config = handle.scenario, handle.scenario.hand_eye
+    events = handle.state_machine.events(handle.state_machine.GetMyContextFromRoot(context))
+    bank = handle.candidates.bank(handle.candidates.GetMyContextFromRoot(context))
+    convergences = [e.time for e in events if e.kind == coordination.CONVERGED]
+    detections = [e.time for e in events if e.kind == coordination.CHANGE_DETECTED]
+    t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
+    _, X_WH_log = _log(handle, diagram, context, "X_WH")
+    _, p_HP_log = _log(handle, diagram, context, "true_p_HP")
+    criteria = config.coordination.criteria()
+
+    adopted = []
+    for k, t in enumerate(convergences):
+        if k >= len(bank.adoptions):
+            break
+        a = bank.adoptions[k]
+        identifier = EyeToHandIdentifier(config.coordination.forgetting_factor, criteria)
+        identifier.set_state(a.statistic)
+        est = identifier.solve(refine_estimate=True).estimate
+        X_WC = _at(t_pose, X_WC_log, t).reshape(4, 4)
+        p_true = best_p_HP_given_camera(a.statistic, X_WC[:3, :3], X_WC[:3, 3])
+        rod_tip = _at(t_pose, p_HP_log, t)
+        adopted.append({
+            "time_s": t, "feature_id": a.feature_id, "candidate_found_s": a.admitted,
+            "round_start_s": a.round_start, "num_samples": identifier.num_samples,
+            "camera_position_error_mm": 1e3 * float(np.linalg.norm(est.p_WC - X_WC[:3, 3])),
+            "camera_rotation_error_deg": math.degrees(rotation_angle(est.R_WC.T @ X_WC[:3, :3])),
+            "tool_point_error_mm": 1e3 * float(np.linalg.norm(est.p_HP - p_true)),
+            "tool_point_distance_to_rod_tip_mm": 1e3 * float(np.linalg.norm(est.p_HP - rod_tip)),
+            "expected_rms_mm": 1e3 * math.sqrt(max(est.mean_squared_error, 0.0)),
+        })  # fmt: skip
+
+    disturbances = _disturbances(scenario)
+    for d in disturbances:
+        after = [t for t in detections if t >= d["time_s"]]
+        nxt = [x["time_s"] for x in disturbances if x["time_s"] > d["time_s"]]
+        limit = nxt[0] if nxt else math.inf
+        d["detected_s"] = after[0] if after and after[0] < limit else None
+        d["detection_latency_s"] = None if d["detected_s"] is None else d["detected_s"] - d["time_s"]
+        reconv = [t for t in convergences if d["detected_s"] is not None and t > d["detected_s"]]
+        d["reconverged_s"] = reconv[0] if reconv else None
+        d["reconvergence_after_detection_s"] = None if not reconv else reconv[0] - d["detected_s"]
+    false_alarms = [t for t in detections
+                    if not any(0.0 <= t - d["time_s"] <= config.false_alarm_window for d in disturbances)]
+    first = adopted[0] if adopted else None
+    return {
+        "convergence_times_s": convergences,
+        "detection_times_s": detections,
+        "adopted": adopted,
+        "disturbances": disturbances,
+        "false_alarms_s": false_alarms,
+        "num_false_alarms": len(false_alarms),
+        "first_convergence_after_found_s": (
+            None if first is None else first["time_s"] - first["round_start_s"]),
+        "first_convergence_after_adopted_feature_found_s": (
+            None if first is None else first["time_s"] - first["candidate_found_s"]),
+        "observed_fraction": _observed_fraction(handle, diagram, context),
+    }
+
+
+def _observed_fraction(handle, diagram, context) -> float | None:
+    """Of the log samples in OBSERVE, the fraction with a new observation since the previous one
+    (the adopted point was seen and measured)."""
+    times, mode = _log(handle, diagram, context, "mode")
+    _, observation = _log(handle, diagram, context, "observation")
+    observing = mode[1:, 0] == coordination.OBSERVE
+    if not observing.any():
+        return None
+    new = np.diff(observation[:, 0]) > 0
+    return float(new[observing].mean())
+
+
+def plot(handle, diagram, context, metrics, path: Path) -> None:
+    """Paper Fig. 9: lambda_13..16, SSD, and s_t against the allowable error, the mode shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t, eig = _log(handle, diagram, context, "eigenvalues")
+    _, ssd = _log(handle, diagram, context, "ssd")
+    _, observation = _log(handle, diagram, context, "observation")
+    _, sigma = _log(handle, diagram, context, "allowable_error")
+    _, mode = _log(handle, diagram, context, "mode")
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    for k in range(12, 16):
+        axes[0].semilogy(t, np.maximum(eig[:, k], 1e-16), label=f"$\\lambda_{{{k + 1}}}$")
+    axes[0].set_ylabel("eigenvalues")
+    axes[0].legend(loc="upper right", ncol=4, fontsize=8)
+    axes[1].semilogy(t, np.where(np.isfinite(ssd[:, 0]), ssd[:, 0], np.nan), color="k")
+    axes[1].axhline(handle.scenario.hand_eye.coordination.max_ssd, color="r", ls="--", lw=0.8)
+    axes[1].set_ylabel("SSD")
+    observing = mode[:, 0] == coordination.OBSERVE
+    s_t = np.where(observing & np.isfinite(observation[:, 1]), observation[:, 1], np.nan)
+    axes[2].semilogy(t, np.maximum(s_t, 1e-12), ".", ms=1.5, label="$s_t$ (m$^2$)")
+    axes[2].semilogy(t, np.where(observing, sigma[:, 0], np.nan), "r", lw=1, label="allowable error")
+    axes[2].set_ylabel("error")
+    axes[2].legend(loc="upper right", fontsize=8)
+    for ax in axes:
+        _shade(ax, t, observing)
+        for d in metrics["disturbances"]:
+            ax.axvline(d["time_s"], color="m", lw=1)
+        for c in metrics["convergence_times_s"]:
+            ax.axvline(c, color="g", lw=0.8, ls=":")
+        for c in metrics["detection_times_s"]:
+            ax.axvline(c, color="r", lw=0.8, ls=":")
+    axes[2].set_xlabel("time (s): OBSERVE shaded; disturbance magenta, convergence green, detection red")
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
+    plt.close(fig)
+    write_atomically(path, buffer.getvalue())
+
+
+def _shade(ax, t, on) -> None:
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], on.astype(int), [0]])))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        ax.axvspan(t[start], t[min(stop, len(t) - 1)], color="0.85", lw=0)
+
+
+def finish(handle, diagram, context, out_dir) -> dict:
+    metrics = evaluate(handle, diagram, context)
+    out_dir = Path(out_dir)
+    plot(handle, diagram, context, metrics, out_dir / "hand_eye_fig9.png")
+    metrics["plot"] = "hand_eye_fig9.png"
+    return metrics

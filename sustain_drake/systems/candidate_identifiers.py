@@ -1,0 +1,119 @@
+"""One eye-to-hand identifier per candidate body feature (paper Fig. 7) as a Drake system."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import LeafSystem
+
+from sustain_drake.identification import candidates
+from sustain_drake.identification.candidates import CandidateBank, CandidateParams
+from sustain_drake.identification.eye_to_hand import N_UNKNOWNS
+from sustain_drake.perception.optical_flow import TrackedFeatures
+from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
+from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation, declare_solution_outputs
+
+
+class CandidateIdentifiers(LeafSystem):
+    """Identifiers for the candidate tracked points, the first to converge leads
+    (``identification.candidates``).
+
+    .. pydrake_system::
+
+        name: CandidateIdentifiers
+        input_ports:
+        - tracked_features
+        - feature_on_body
+        - X_WH
+        - reset (optional)
+        - reference_x (optional)
+        output_ports:
+        - eigenvalues
+        - x
+        - ssd
+        - verdict
+        - expected_mse
+        - observation
+        - solution
+        - X_WC
+        - p_HP
+        - candidates
+
+    Inputs: ``tracked_features`` (``TrackedFeatures`` of an ``OpticalFlowTracker``: ids, ``p_CP``
+    in m, ``valid``, capture ``time``), ``feature_on_body`` (``FeatureBodyFlags`` of a
+    ``MotionCoincidenceDetector``, same order), ``X_WH`` (``RigidTransform``, the hand pose now:
+    the pose at each frame's capture time is taken from a short history), ``reset`` (1,
+    edge-triggered: a new value drops every candidate; connect a ``CoordinationStateMachine``'s
+    ``reset``), ``reference_x`` (16: the adopted estimate, for ``observation``; connect the state
+    machine's ``adopted_x``).
+
+    Outputs, the same as a ``SustainableIdentifierSystem`` with ``EyeToHandFormulation`` so that a
+    ``CoordinationStateMachine`` plugs in: the solution-derived ports are those of the *shown*
+    candidate (the leader once one converged, else the one with the most samples);
+    ``observation`` is ``[sample_count, s_t]`` of the observed feature (the leader's, or a
+    re-acquired one) under ``reference_x``, m^2; ``X_WC`` (RigidTransform), ``p_HP`` (3, m);
+    ``candidates`` (``candidates.CandidateBank``: every candidate, the leader, the adoptions).
+
+    State: the ``CandidateBank`` (abstract, immutable: contexts clone), updated every ``period``
+    s (a periodic unrestricted update at the camera's rate).
+    """
+
+    def __init__(self, formulation: EyeToHandFormulation | None = None, params: CandidateParams | None = None,
+                 period: float = 1.0 / 30.0):  # fmt: skip
+        super().__init__()
+        if not period > 0:
+            raise ValueError(f"period must be > 0, got {period}")
+        self._formulation = formulation or EyeToHandFormulation()
+        self._params = params or CandidateParams()
+        if self._params.pose_tolerance >= period:
+            self._params = CandidateParams(**{**self._params.__dict__, "pose_tolerance": 0.3 * period})
+        self._features = self.DeclareAbstractInputPort(
+            "tracked_features", AbstractValue.Make(TrackedFeatures()))
+        self._flags = self.DeclareAbstractInputPort("feature_on_body", AbstractValue.Make(FeatureBodyFlags()))
+        self._X_WH = self.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform()))
+        self._reset = self.DeclareVectorInputPort("reset", 1)
+        self._reference = self.DeclareVectorInputPort("reference_x", N_UNKNOWNS)
+        self._empty = candidates.empty_solution(self._formulation.criteria)
+        self._bank = self.DeclareAbstractState(AbstractValue.Make(CandidateBank()))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+        declare_solution_outputs(self, N_UNKNOWNS, self.solution)
+        self.DeclareVectorOutputPort(
+            "observation", 2,
+            lambda c, o: o.SetFromVector([self.bank(c).sample_count, self.bank(c).sample_error]),
+            prerequisites_of_calc={self.all_state_ticket()},
+        )  # fmt: skip
+        self.DeclareAbstractOutputPort(
+            "solution", lambda: AbstractValue.Make(self._empty),
+            lambda c, o: o.set_value(self.solution(c)), prerequisites_of_calc={self.all_state_ticket()},
+        )  # fmt: skip
+        self._formulation.declare_outputs(self, self.solution)
+        self.DeclareStateOutputPort("candidates", self._bank)
+
+    @property
+    def params(self) -> CandidateParams:
+        return self._params
+
+    def bank(self, context) -> CandidateBank:
+        return context.get_abstract_state(self._bank).get_value()
+
+    def solution(self, context):
+        """The shown candidate's solution (an empty one before any candidate)."""
+        shown = self.bank(context).shown
+        return self._empty if shown is None else shown.solution
+
+    def _update(self, context, state) -> None:
+        features = self._features.Eval(context)
+        flags = self._flags.Eval(context)
+        on_body = np.zeros(len(features), bool)
+        if len(flags.ids) == len(features) and np.array_equal(flags.ids, features.ids):
+            on_body = np.asarray(flags.on_body, bool)
+        reset = float(self._reset.Eval(context)[0]) if self._reset.HasValue(context) else 0.0
+        reference = self._reference.Eval(context) if self._reference.HasValue(context) else None
+        new = candidates.step(
+            self.bank(context), self._params, self._formulation.criteria, context.get_time(), reset,
+            self._X_WH.Eval(context).GetAsMatrix4(), features.time, features.ids, features.p_CP,
+            features.valid, on_body, reference, self._formulation.forgetting_factor,
+        )  # fmt: skip
+        state.get_mutable_abstract_state(self._bank).set_value(new)

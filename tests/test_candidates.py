@@ -1,0 +1,194 @@
+"""Candidate tracked points (paper Fig. 7): bookkeeping on scripted features with a known answer."""
+
+import math
+
+import numpy as np
+import pytest
+from eye_to_hand_data import make_truth, rotation_error_deg
+from scipy.spatial.transform import Rotation
+
+from sustain_drake.identification import candidates
+from sustain_drake.identification.candidates import CandidateBank, CandidateParams
+from sustain_drake.identification.eye_to_hand import default_criteria, pack_x
+
+CRITERIA = default_criteria()
+PARAMS = CandidateParams()
+DT = 1.0 / 30.0
+TRUTH = make_truth(5)
+
+
+def hand_pose(k):
+    """A smooth, rich hand motion (rotation about all axes, 0.2 m of travel)."""
+    t = k * DT
+    R = Rotation.from_rotvec(0.5 * np.array([math.sin(0.9 * t), math.sin(1.3 * t + 1), math.sin(0.7 * t + 2)]))
+    X = np.eye(4)
+    X[:3, :3] = R.as_matrix()
+    X[:3, 3] = [0.4 + 0.1 * math.sin(0.5 * t), 0.1 * math.sin(0.8 * t), 0.3 + 0.1 * math.sin(1.1 * t)]
+    return X
+
+
+def seen(X_WH, p_HP, rng, noise=0.5e-3):
+    """The point p_HP of the hand, in the (true) camera frame, with noise."""
+    p_W = X_WH[:3, :3] @ p_HP + X_WH[:3, 3]
+    X_WC = TRUTH.X_WC
+    return X_WC[:3, :3].T @ (p_W - X_WC[:3, 3]) + rng.normal(0, noise, 3)
+
+
+def other_link(X_WH, k, p_LQ):
+    """A point on another link: the link turns about the hand's x axis by a varying angle."""
+    X = X_WH.copy()
+    X[:3, :3] = X_WH[:3, :3] @ Rotation.from_rotvec([0.6 * math.sin(0.37 * k * DT), 0, 0]).as_matrix()
+    return X, p_LQ
+
+
+def run(frames, bank=None, reset=0.0, reference=None, start=0, params=PARAMS):
+    """frames(k, X_WH, rng) -> (ids, p_CP, valid, on_body); one frame per tick."""
+    bank = CandidateBank() if bank is None else bank
+    rng = np.random.default_rng(3)
+    for k in range(start, start + 10_000):
+        X = hand_pose(k)
+        out = frames(k, X, rng)
+        if out is None:
+            return bank, k
+        ids, p, valid, body = out
+        bank = candidates.step(bank, params, CRITERIA, k * DT, reset, X, k * DT, np.array(ids), np.array(p),
+                               np.array(valid), np.array(body), reference)
+    return bank, k
+
+
+P_TOOL = TRUTH.p_HP
+P_OTHER = np.array([0.05, -0.1, 0.2])
+
+
+def test_hand_point_leads_another_link_never_converges():
+    def frames(k, X, rng):
+        if k >= 300:
+            return None
+        X_L, p = other_link(X, k, P_OTHER)
+        return [7, 9], [seen(X_L, p, rng), seen(X, P_TOOL, rng)], [True, True], [True, True]
+
+    bank, _ = run(frames)
+    assert bank.leader == 9
+    other = bank.find(7)
+    assert other is not None and other.solution.num_samples >= 30 and not other.solution.verdict.converged
+    est = bank.find(9).solution.estimate
+    assert np.linalg.norm(est.p_WC - TRUTH.X_WC[:3, 3]) < 5e-3
+    assert rotation_error_deg(est.R_WC, TRUTH.X_WC[:3, :3]) < 0.5
+    assert np.linalg.norm(est.p_HP - P_TOOL) < 5e-3
+    assert [a.feature_id for a in bank.adoptions] == [9]
+
+
+def test_other_link_alone_is_never_adopted_and_is_rejected_in_time():
+    params = CandidateParams(max_unconverged_time=5.0)
+
+    def frames(k, X, rng):
+        if k >= 300:
+            return None
+        X_L, p = other_link(X, k, P_OTHER)
+        return [7], [seen(X_L, p, rng)], [True], [True]
+
+    bank, _ = run(frames, params=params)
+    assert bank.leader == -1 and not bank.adoptions
+    assert bank.find(7) is None and 7 in bank.rejected  # after 5 s, its slot was freed for good
+
+
+def test_first_to_converge_is_adopted_and_stays_leader():
+    # Feature 3 (0.5 mm noise) is seen from the start; feature 2, a cleaner point of the hand
+    # (0.05 mm), only from frame 150 on: 3 converges first (frame 116) and stays the leader.
+    p2 = P_TOOL + [0.02, 0.0, 0.03]
+
+    def frames(k, X, rng):
+        if k >= 400:
+            return None
+        return [2, 3], [seen(X, p2, rng, noise=5e-5), seen(X, P_TOOL, rng)], [k >= 150, True], [True, True]
+
+    bank, _ = run(frames)
+    assert [a.feature_id for a in bank.adoptions] == [3] and bank.leader == 3
+    first = bank.adoptions[0]
+    assert first.time < 150 * DT and first.admitted == 0.0
+    # Once there is a leader, the others stop feeding (their statistics are frozen).
+    assert bank.find(3).solution.num_samples == 400
+    assert bank.find(2) is None or bank.find(2).solution.num_samples < 10
+
+
+def test_a_lost_feature_stops_feeding_and_nothing_false_is_adopted():
+    def frames(k, X, rng):
+        if k >= 120:
+            return None
+        valid = k < 5 or k >= 100  # occluded (no depth) from frame 5 to 99
+        return [4], [seen(X, P_TOOL, rng) if valid else np.zeros(3)], [valid], [True]
+
+    bank, _ = run(frames, params=CandidateParams(max_lost_time=10.0))
+    c = bank.find(4)
+    assert c.solution.num_samples == 5 + 20 and bank.leader == -1  # 25 samples, no gate yet ...
+    # ... and with the default max_lost_time (2 s) the occluded candidate was dropped.
+    bank, _ = run(frames)
+    assert bank.find(4) is None or bank.find(4).admitted > 3.0
+    assert not bank.adoptions
+
+    def tracked_then_gone(k, X, rng):
+        if k >= 60:
+            return None
+        return ([5], [seen(X, P_TOOL, rng)], [True], [True]) if k < 8 else ([], np.zeros((0, 3)), [], [])
+
+    bank, _ = run(tracked_then_gone)
+    assert bank.candidates == () and bank.leader == -1
+
+
+def test_motion_gate_skips_a_jump():
+    def frames(k, X, rng):
+        if k >= 30:
+            return None
+        p = seen(X, P_TOOL, rng)
+        if k == 20:
+            p = p + [0.0, 0.0, 0.5]  # the depth of the background behind a silhouette
+        return [1], [p], [True], [True]
+
+    bank, _ = run(frames)
+    assert bank.find(1).solution.num_samples == 28  # frames 20 (the jump) and 21 (back) skipped
+    assert candidates.within_motion_gate(np.zeros(3), np.eye(4), np.array([0.005, 0, 0]), np.eye(4), PARAMS)
+    assert not candidates.within_motion_gate(np.zeros(3), np.eye(4), np.array([0.05, 0, 0]), np.eye(4), PARAMS)
+
+
+def test_reset_drops_every_candidate_and_a_new_round_starts():
+    def frames(k, X, rng):
+        return None if k >= 330 else ([9], [seen(X, P_TOOL, rng)], [True], [True])
+
+    bank, k = run(frames)
+    assert bank.leader == 9
+    bank = candidates.step(bank, PARAMS, CRITERIA, k * DT, 1.0, hand_pose(k), k * DT, np.array([9]),
+                           np.array([seen(hand_pose(k), P_TOOL, np.random.default_rng(0))]), np.array([True]),
+                           np.array([True]))
+    assert bank.leader == -1 and [c.feature_id for c in bank.candidates] == [9]
+    assert bank.find(9).solution.num_samples == 1 and bank.round_start == pytest.approx(k * DT)
+
+
+def test_observation_uses_the_reference_and_reacquires_a_lost_point():
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+
+    def frames(k, X, rng):
+        if k >= 420:
+            return None
+        if k < 360:
+            return [9], [seen(X, P_TOOL, rng)], [True], [True]
+        # The track of the point is lost; a new track (id 12) of the same point and a body feature
+        # elsewhere (id 11) appear.
+        return [11, 12], [seen(X, P_TOOL + [0.1, 0, 0], rng), seen(X, P_TOOL, rng)], [True, True], [True, True]
+
+    bank, _ = run(frames, reference=x_true)
+    assert bank.leader == 9 and bank.observed == 12
+    assert bank.sample_error < 1e-5  # 0.5 mm noise per axis: s_t ~ 1e-6 m^2
+    count = bank.sample_count
+
+    def moved(k, X, rng):  # the point is 5 cm away from where the reference puts it: big s_t
+        return None if k >= 425 else ([12], [seen(X, P_TOOL + [0.05, 0, 0], rng)], [True], [True])
+
+    bank, _ = run(moved, bank, reference=x_true, start=420)
+    assert bank.sample_count == count + 5 and bank.sample_error > 1e-3
+
+
+def test_params_validation():
+    with pytest.raises(ValueError, match="max_candidates"):
+        CandidateParams(max_candidates=0)
+    with pytest.raises(ValueError, match="reacquire_radius"):
+        CandidateParams(reacquire_radius=float("nan"))
