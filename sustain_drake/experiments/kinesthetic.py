@@ -101,6 +101,7 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
         "eigenvalues": ident.GetOutputPort("eigenvalues"), "mode": sm.GetOutputPort("mode"),
         "sample_valid": gate.GetOutputPort("sample_valid"), "touch": estimator.GetOutputPort("touch"),
         "p_WP": estimator.GetOutputPort("p_WP"), "f_env_W": estimator.GetOutputPort("f_env_W"),
+        "residual_wrench": estimator.GetOutputPort("residual_wrench"),
         "true_contact": station.GetOutputPort("true_contact"),
         "true_tool_mass": station.GetOutputPort("true_tool_mass"),
         "true_p_KCm": station.GetOutputPort("true_p_KCm"),
@@ -132,6 +133,9 @@ def touch_errors(logs: dict, min_force: float) -> dict:
     pushed = logs["true_touch"][:, 0] > 0.5  # applied (finger) forces are not contacts
     scored = touch & strong
     errors = 1000.0 * np.linalg.norm(logs["p_WP"][scored] - truth[scored, 1:4], axis=1)
+    # Free motion after the identification: the residual force the touch threshold must clear.
+    free = ~contact & ~pushed & (logs["mode"][:, 0] > 0.5)
+    residual = np.linalg.norm(logs["residual_wrench"][free, 3:6], axis=1)
     return {
         "samples_scored": int(scored.sum()),
         "median_mm": float(np.median(errors)) if errors.size else None,
@@ -140,6 +144,7 @@ def touch_errors(logs: dict, min_force: float) -> dict:
         "false_touch_samples": int((touch & ~contact & ~pushed).sum()),
         "missed_strong_contact_samples": int((strong & ~touch).sum()),
         "strong_contact_samples": int(strong.sum()),
+        "free_motion_max_residual_force_N": float(residual.max()) if residual.size else None,
     }
 
 

@@ -34,8 +34,9 @@ class KinestheticConfig:
     # s between identifier / state-machine updates (the sensor's 100 Hz).
     period: float = 0.01
     quasi_static: QuasiStaticConfig = field(default_factory=QuasiStaticConfig)
-    # A touch also needs a residual force of at least this (N): above the inertial wrench of the
-    # babbling motion (see the README), so free motion is never a touch.
-    min_touch_force: float = 1.0
+    # A touch also needs a residual force of at least this (N): about twice the largest residual
+    # of free motion at 1 rad/s in inertia_touch.yaml (1.1 N, the payload's inertial wrench), so
+    # free motion is not a touch.
+    min_touch_force: float = 2.0
     # Touch points are scored against the true contacts whose force is at least this (N).
     eval_min_force: float = 5.0

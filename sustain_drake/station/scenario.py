@@ -199,6 +199,7 @@ class TouchMotionConfig:
     enabled: bool = False
     targets: list[TouchTarget] = field(default_factory=list)
     approach_height: float = 0.03  # m above the table where the descent starts
+    retreat_height: float = 0.12  # m above the table for the moves between touches
     press_depth: float = 0.02  # m below the table top where the descent would end
     descend_speed: float = 0.01  # m/s of the touching point (nearly quasi-static)
     press_extra: float = 0.004  # m pressed on beyond where the touch was felt
@@ -341,9 +342,10 @@ def validate_scenario(s: Scenario) -> None:
                    f"touch_motion.targets[{i}]: p_TQ and down_T need 3 numbers, p_WQ 2")
             _finite(list(g.p_TQ) + list(g.down_T) + list(g.p_WQ), f"touch_motion.targets[{i}]")
             _check(any(g.down_T), f"touch_motion.targets[{i}]: down_T must not be zero")
-        _finite([tm.approach_height, tm.press_depth, tm.descend_speed, tm.press_extra,
+        _finite([tm.approach_height, tm.retreat_height, tm.press_depth, tm.descend_speed, tm.press_extra,
                  tm.keep_touching, tm.start_delay, tm.max_speed], "touch_motion values")
-        _check(tm.approach_height > 0 and tm.press_depth > 0 and tm.descend_speed > 0
+        _check(tm.approach_height > 0 and tm.retreat_height >= tm.approach_height
+               and tm.press_depth > 0 and tm.descend_speed > 0
                and tm.max_speed > 0 and tm.keep_touching >= 0 and tm.start_delay >= 0
                and 0 <= tm.press_extra <= tm.approach_height + tm.press_depth,
                "touch_motion: heights, speeds must be > 0, times >= 0, press_extra within the "

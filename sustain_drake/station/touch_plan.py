@@ -77,14 +77,16 @@ def touch_postures(plant: MultibodyPlant, tool_body: RigidBody, config: TouchMot
         # the descent is a short, nearly straight joint-space path.
         surface = solve_touch_posture(kin, target, np.array([x, y, table_height]), q_hint, seed=i,
                                       near_hint=False)
-        above = press = None
+        above = press = high = None
         if surface is not None:
+            high = solve_touch_posture(kin, target, np.array([x, y, table_height + config.retreat_height]),
+                                       surface, seed=300 + i)  # fmt: skip
             above = solve_touch_posture(kin, target, np.array([x, y, table_height + config.approach_height]),
                                         surface, seed=100 + i)  # fmt: skip
             press = solve_touch_posture(kin, target, np.array([x, y, table_height - config.press_depth]),
                                         surface, seed=200 + i)  # fmt: skip
-        if above is None or press is None:
+        if above is None or press is None or high is None:
             raise ScenarioError(f"touch_motion.targets[{i}]: the arm cannot reach it (joint limits)")
-        postures.append(TouchPosture(tuple(above), tuple(press)))
+        postures.append(TouchPosture(tuple(above), tuple(press), tuple(high)))
         q_hint = above
     return postures

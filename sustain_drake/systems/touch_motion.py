@@ -11,8 +11,8 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from sustain_drake.systems.motion_generator import quintic
 
 # Phases of the touching program.
-PASS, MOVE, DESCEND, PRESS, KEEP, LIFT, RELEASE, HANDBACK, DONE = range(9)
-PHASE_NAMES = ("PASS", "MOVE", "DESCEND", "PRESS", "KEEP", "LIFT", "RELEASE", "HANDBACK", "DONE")
+PASS, MOVE, APPROACH, DESCEND, PRESS, KEEP, LIFT, RELEASE, HANDBACK, DONE = range(10)
+PHASE_NAMES = ("PASS", "MOVE", "APPROACH", "DESCEND", "PRESS", "KEEP", "LIFT", "RELEASE", "HANDBACK", "DONE")
 # Layout of the header of the discrete state.
 _PHASE, _INDEX, _T0, _DURATION, _START_SINCE, _TOUCH_S, _DETECTED, _MISSED = range(8)
 _HEADER = 8
@@ -23,10 +23,12 @@ _PEAK_OVER_MEAN = 15.0 / 8.0
 @dataclass(frozen=True)
 class TouchPosture:
     """One touch: the arm posture with the tool's touching feature ``approach_height`` above the
-    table point (``q_above``) and ``press_depth`` below it (``q_press``), rad."""
+    table point (``q_above``), ``press_depth`` below it (``q_press``) and, for the moves between
+    touches, ``retreat_height`` above it (``q_high``), rad."""
 
     q_above: tuple[float, ...]
     q_press: tuple[float, ...]
+    q_high: tuple[float, ...]
 
 
 class TouchMotion(LeafSystem):
@@ -49,16 +51,18 @@ class TouchMotion(LeafSystem):
     passes through. Once it has been above 0.5 for ``start_delay`` s (the pause after an
     identification), the program runs; each touch is:
 
-    1. MOVE: a minimum-jerk move (peak joint speed ``max_speed``) to ``q_above``;
+    1. MOVE: a minimum-jerk move (peak joint speed ``max_speed``) to ``q_high``, well above the
+       table (moves between touches change the tool's orientation, which sweeps its corners),
+       then APPROACH ``q_above``;
     2. DESCEND: towards ``q_press`` at a constant rate (``descend_duration`` s for the whole way);
     3. the "keep touching" rule (paper §4.4): when ``touch`` (1, the touch estimator's flag)
        rises, PRESS on by ``press_extra`` of the descent (a fraction, 0..1) and KEEP the
        posture for ``keep_touching`` s; a descent that ends with no touch felt is a miss;
-    4. LIFT back to ``q_above``.
+    4. LIFT back to ``q_high``.
 
     After the last posture it starts again from the first if ``repeat``, else it holds (DONE).
     When ``start`` falls during the program (the body changed: identify again), the arm lifts
-    (RELEASE) and the babbling takes over smoothly (HANDBACK: a 1 s blend). ``phase`` (4) is
+    (RELEASE, to ``q_high``) and the babbling takes over smoothly (HANDBACK: a 1 s blend). ``phase`` (4) is
     ``[phase, index of the touch, touches felt, misses]`` (phase: see ``PHASE_NAMES``).
 
     State: one discrete vector (phase, touch index, segment start time and duration, since when
@@ -74,8 +78,10 @@ class TouchMotion(LeafSystem):
             raise ValueError("TouchMotion needs at least one touch posture")
         self._above = np.array([p.q_above for p in postures], dtype=float)
         self._press = np.array([p.q_press for p in postures], dtype=float)
+        self._high = np.array([p.q_high for p in postures], dtype=float)
         n = self._above.shape[1]
-        if self._press.shape != self._above.shape or not np.all(np.isfinite(self._above + self._press)):
+        if (self._press.shape != self._above.shape or self._high.shape != self._above.shape
+                or not np.all(np.isfinite(self._above + self._press + self._high))):
             raise ValueError("touch postures need finite q_above and q_press of the same length")
         if not (descend_duration > 0 and keep_touching >= 0 and 0 <= press_extra <= 1 and max_speed > 0
                 and start_delay >= 0 and period > 0 and min_duration > 0):  # fmt: skip
@@ -159,12 +165,14 @@ class TouchMotion(LeafSystem):
         if phase in (PASS, HANDBACK):
             if start and t - x[_START_SINCE] >= self._delay - 1e-9:
                 x[_INDEX] = k = 0 if phase == PASS else k
-                self._move_to(x, t, MOVE, q, v, self._above[k])
+                self._move_to(x, t, MOVE, q, v, self._high[k])
             elif phase == HANDBACK and ended:
                 x[_PHASE] = PASS
         elif not start and phase != RELEASE:
-            self._move_to(x, t, RELEASE, q, v, self._above[k])
+            self._move_to(x, t, RELEASE, q, v, self._high[k])
         elif phase == MOVE and ended:
+            self._move_to(x, t, APPROACH, q, v, self._above[k])
+        elif phase == APPROACH and ended:
             self._start(x, t, DESCEND, self._above[k], self._press[k], self._descend)
             x[_TOUCH_S] = -1.0
         elif phase == DESCEND and touch:
@@ -176,15 +184,15 @@ class TouchMotion(LeafSystem):
             self._start(x, t, PRESS, q, goal, max(self._extra * self._descend, 0.05), v)
         elif phase == DESCEND and ended:
             x[_MISSED] += 1
-            self._move_to(x, t, LIFT, q, v, self._above[k])
+            self._move_to(x, t, LIFT, q, v, self._high[k])
         elif phase == PRESS and ended:
             self._start(x, t, KEEP, q, q, self._keep)
         elif phase == KEEP and ended:
-            self._move_to(x, t, LIFT, q, v, self._above[k])
+            self._move_to(x, t, LIFT, q, v, self._high[k])
         elif phase == LIFT and ended:
             if k + 1 < len(self._above) or self._repeat:
                 x[_INDEX] = k = (k + 1) % len(self._above)
-                self._move_to(x, t, MOVE, q, v, self._above[k])
+                self._move_to(x, t, MOVE, q, v, self._high[k])
             else:
                 self._start(x, t, DONE, q, q, 1.0)
         elif phase == RELEASE and ended:
