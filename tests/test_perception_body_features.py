@@ -86,3 +86,16 @@ def test_memory_copy_is_deep_and_bad_inputs_raise():
                               np.ones((1, 2)))
     with pytest.raises(ValueError, match="invalid feature parameters"):
         FeatureParams(hits=0)
+
+
+def test_a_feature_seeded_while_moving_has_no_onset():
+    """A corner seeded on a walking person inside a tested cell, moving from its first tracked
+    frame, never "rises up from 0": no hit, whatever the trial."""
+    state = trial_state(1, 1.0)
+    mem = FeatureMemory()
+    ids, cell = np.array([11, 12]), np.array([0, 0])
+    # 11 appears at 1.05 s already moving; 12 appears at 0.5 s at rest and rises at 1.1 s.
+    mem = update_feature_memory(mem, state, 0.5, ids[1:], cell[1:], np.zeros((1, 2)))
+    mem = run(mem, state, 0.5, 1.0, ids[1:], cell[1:], lambda t: [0.0])
+    mem = run(mem, state, 1.0, 1.4, ids, cell, lambda t: [0.5, 0.5 * (t > 1.1)])
+    assert mem.hits.tolist() == [0.0, 1.0]

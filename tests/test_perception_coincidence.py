@@ -224,3 +224,23 @@ def test_eq27_count_matches_a_brute_force_reference(samples):
             earlier = [m for m in a_on if m <= k]
             expected += bool(earlier) and (k - earlier[-1]) * DT <= 0.31
         assert eps[j] == expected
+
+
+def test_a_trial_is_a_new_move_from_rest_not_a_late_joint_of_the_same_move():
+    """Joint 0 starts at sample 30 and its cell responds: a request at q* = 0. Joint 1 starts
+    3 samples later from the same posture while joint 0 still moves: no trial. After a rest,
+    a move from q* starts one."""
+    n = 120
+    a0 = signal(n, (30, 50), (90, 100))
+    a1 = signal(n, (33, 50))
+    states = drive(np.stack([a0, a1], axis=1), signal(n, (31, 50))[:, None])
+    s_late = states[40]
+    assert s_late.request_count == 1 and s_late.trial_count == 0
+    assert s_late.q_request.tolist() == [0.0, 0.0]
+    # Joint 0 moved 20 samples at 0.5 rad/s (0.33 rad) away from q*: its move from there at
+    # sample 90 starts far from q*, still no trial; a rest at q* and a move from it would.
+    assert states[-1].trial_count == 0
+    back = drive(np.stack([signal(n, (30, 50), (90, 100)), signal(n, (33, 50))], axis=1),
+                 signal(n, (31, 50), (91, 100))[:, None],
+                 CoincidenceParams(posture_tolerance=0.4))
+    assert back[-1].trial_count == 1 and back[-1].hits[0, 0] == 1

@@ -34,6 +34,8 @@ LOGGED_VECTORS = ("joint_positions", "joint_velocities", "head_joint_positions",
                   "true_p_KCo", "true_touch")
 LOGGED_POSES = ("X_WH", "true_X_WC")
 REPLAY_FPS = 30.0
+# --seed delays the distractor's start by up to this (s), so seeds differ in its phase too.
+SEED_START_SPREAD = 3.0
 
 
 def register(subparsers) -> None:
@@ -49,6 +51,9 @@ def register(subparsers) -> None:
     p.add_argument("--log-rate", type=float, default=100.0,
                    help="samples per simulated second in log.npz (default %(default)s)")
     p.add_argument("--no-replay", action="store_true", help="do not record replay.html")
+    p.add_argument("--seed", type=int,
+                   help="override the scenario's seeds: motion, sensor noise (depth, wrench) "
+                   f"and the distractor's start (delayed by 0-{SEED_START_SPREAD:g} s)")
     p.set_defaults(handler=run)
 
 
@@ -68,7 +73,7 @@ class SimulationResult:
 def run(args) -> int:
     result = simulate_scenario(args.scenario, duration=args.duration, out=args.out,
                                live=args.meshcat, log_rate=args.log_rate,
-                               replay=not args.no_replay)
+                               replay=not args.no_replay, seed=args.seed)
     print(f"simulated {result.simulated:g} s in {result.wall:.1f} s "
           f"({result.realtime_factor:.2f}x real time)")
     if result.replay is not None:
@@ -86,14 +91,17 @@ def _positive(value: float | None, name: str) -> None:
 
 def simulate_scenario(scenario_path: Path, duration: float | None = None,
                       out: Path | None = None, live: bool = False, log_rate: float = 100.0,
-                      replay: bool = True) -> SimulationResult:
-    """Runs a scenario; bad input raises ``CliError`` (one line) before anything is written."""
+                      replay: bool = True, seed: int | None = None) -> SimulationResult:
+    """Runs a scenario; bad input raises ``CliError`` (one line) before anything is written.
+    ``seed`` overrides the scenario's seeds (:func:`apply_seed`)."""
     _positive(duration, "--duration")
     _positive(log_rate, "--log-rate")
     try:
         scenario = load_scenario(scenario_path)
     except ScenarioError as e:
         raise CliError(str(e)) from None
+    if seed is not None:
+        apply_seed(scenario, seed)
     duration = scenario.duration if duration is None else duration
     out = Path("out") / Path(scenario_path).stem if out is None else Path(out)
     if out.exists() and not out.is_dir():
@@ -157,6 +165,19 @@ def simulate_scenario(scenario_path: Path, duration: float | None = None,
         metrics_path = out / "metrics.json"
         write_atomically(metrics_path, json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     return SimulationResult(duration, wall, replay_path, log_path, metrics_path)
+
+
+def apply_seed(scenario, seed: int) -> None:
+    """One seed for a whole run: the motion generator's, the depth and wrench noise's, and the
+    distractor's start, delayed by a seeded 0-``SEED_START_SPREAD`` s."""
+    if seed < 0:
+        raise CliError(f"--seed must be >= 0, got {seed}")
+    scenario.motion.seed = seed
+    # Offsets keep the noise streams apart from the motion's (generators seeded (seed, k)).
+    scenario.depth_noise.seed = seed + 1000
+    scenario.wrench_sensor.seed = seed + 2000
+    delay = np.random.default_rng([seed, 2024]).uniform(0.0, SEED_START_SPREAD)
+    scenario.distractor.start_time += float(delay)
 
 
 def _npz_bytes(diagram, simulator, loggers, scenario_path: Path) -> bytes:

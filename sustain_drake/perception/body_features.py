@@ -7,6 +7,7 @@ the cell. A feature keeps its track id while the arm carries it, so evidence gat
 feature follows the body. A feature gets a *hit* when, during a confirming trial, it lies in a
 cell under test and its own flow rises up from 0 (moving after ``quiet`` s without motion)
 within the trial's response window after the actuator onset; at most one hit per trial. A
+feature must have been tracked at rest for ``quiet`` s before its flow can rise from 0. A
 feature is on the body once it has ``hits`` hits (default 2), from different trials.
 
 A distractor's feature rarely qualifies: while it keeps moving (a person walking) it has no
@@ -28,6 +29,7 @@ class FeatureParams:
     flow_threshold_px: float = 0.2   # per-frame flow at or above this is feature motion
     quiet: float = 0.1               # s without motion before the feature's flow "rises from 0"
     hits: int = 2                    # trial hits that make a feature body
+    skip_known_cells: bool = True    # cells holding a body feature raise no confirming request
 
     def __post_init__(self):
         if not (self.flow_threshold_px > 0 and self.quiet >= 0 and self.hits >= 1):
@@ -82,6 +84,11 @@ def update_feature_memory(mem: FeatureMemory, state: CoincidenceState, t: float,
     order = np.argsort(ids, kind="stable")
     ids, cell, flow = ids[order], cell[order], flow[order]
     out = _aligned(mem, ids)
+    # A feature first seen now has not been seen at rest: its flow can only "rise up from 0"
+    # after it has been tracked still for ``quiet`` s (a corner seeded on a walking person
+    # would otherwise have an onset on its second frame).
+    new = ~np.isin(ids, mem.ids)
+    out.last_motion[new] = t
     moving = np.linalg.norm(flow, axis=1) >= params.flow_threshold_px
     onset = moving & (t - out.last_motion > params.quiet)
     out.last_motion[moving] = t
@@ -94,6 +101,15 @@ def update_feature_memory(mem: FeatureMemory, state: CoincidenceState, t: float,
         out.hits[hit] += 1
         out.last_trial[hit] = state.trial_count
     return out
+
+
+def body_feature_cells(mem: FeatureMemory, ids: np.ndarray, cell: np.ndarray, n_c: int,
+                       params: FeatureParams = FeatureParams()) -> np.ndarray:
+    """Bool per cell (n_c): the cell holds at least one body feature now."""
+    cells = np.zeros(n_c, bool)
+    cell = np.asarray(cell, np.int64).ravel()[features_on_body(mem, ids, params)]
+    cells[cell[(cell >= 0) & (cell < n_c)]] = True
+    return cells
 
 
 def features_on_body(mem: FeatureMemory, ids: np.ndarray,

@@ -44,13 +44,18 @@ moves by itself" (it falls in the window by chance with probability ``p0_j``). I
    ``single_joint_confirm`` only the most proximal candidate actuator ``request_joint``). The coincidence that
    raised the request is *not* evidence: it was selected because it coincided.
 3. *Trial* (``C_j``). The first actuator onset within ``posture_tolerance`` of ``q*`` after the
-   request starts a trial. A candidate cell whose visual onset coincides (Eq. (27)) with an
-   actuator onset of the trial, at most ``w = response_window`` (default ``τ_s``) after it, is a
-   *hit*: ``C_j += ln(p_response / p0_j)`` with ``p0_j = 1 - exp(-λ_j w)``. A candidate cell with
-   no visual response although one of its candidate actuators moved again is a *miss* -- the
+   request, with the whole arm at rest for ``quiet_a`` before it (a new move, not a late
+   onset of another joint in the move that raised the request), starts a trial. A candidate
+   cell whose visual onset coincides (Eq. (27)) with an actuator onset of the trial, at most
+   ``w = response_window`` (default ``τ_s``) after it, is a *hit*:
+   ``C_j += ln(p_response / p0_j)`` with ``p0_j = 1 - exp(-λ0_j w)``. ``λ0_j`` is the cell's
+   rate of onsets with no actuator onset within ``w`` before them, robot still or not (and at
+   least ``λ_j``): a walking person's cell shows its rate while the arm babbles, whereas the
+   arm is rarely still long enough to measure ``λ_j``. A candidate cell with no visual
+   response although one of its candidate actuators moved again is a *miss* -- the
    counter-evidence *actuator onsets with no visual response*, counted only here, at the same
    posture, where Eq. (26) says a body cell must respond: ``C_j += ln((1-p_response)/(1-p0_j))``.
-   The trial ends when every candidate has hit, or after ``τ_a + τ_s``. Cells that hit and are
+   The trial ends when every candidate has hit, or after ``2 w``. Cells that hit and are
    not yet body are tested again at once at the same posture. A request with no trial within
    ``confirm_timeout`` expires without evidence. ``C_j`` is floored at ``ln(beta)`` so that a cell
    that held a distractor can still become body later (the arm may move into it).
@@ -133,6 +138,12 @@ class CoincidenceParams:
         return self.tau_s if self.response_window is None else self.response_window
 
     @property
+    def trial_duration(self) -> float:
+        """How long (s) after its first actuator onset a trial counts onsets: ``2 w``, so a
+        joint of the same move whose onset is seen a little later still counts."""
+        return 2.0 * self.trial_window
+
+    @property
     def evidence_floor(self) -> float:
         return float(np.log(self.beta))
 
@@ -158,6 +169,8 @@ _FIELDS = (
     ("t_onset_s", lambda na, nc: (nc,)),
     ("unexplained", lambda na, nc: (nc,)),    # visual onsets while the robot was still
     ("t_still", lambda na, nc: (nc,)),        # T_still,j: still time the cell could have onset, s
+    ("free_onsets", lambda na, nc: (nc,)),    # visual onsets with no actuator onset within w
+    ("t_free", lambda na, nc: (nc,)),         # quiet-cell time with no actuator onset within w, s
     ("evidence", lambda na, nc: (nc,)),       # L_j
     ("candidates", lambda na, nc: (nc,)),     # cells under test by the pending request
     ("trial_cells", lambda na, nc: (nc,)),    # cells tested by the latest trial (kept after it)
@@ -241,9 +254,19 @@ class CoincidenceState:
         """Which actuator moves which cell (bool, n_a x n_c): body cell, more hits than misses."""
         return self.body(params)[None, :] & (self.hits > self.misses)
 
+    def chance_rate(self, params: CoincidenceParams) -> np.ndarray:
+        """``λ0_j``, 1/s: cell j's rate of visual onsets with no actuator onset within ``w``
+        before them (robot still or not), with the same prior as ``λ_j``. If the cell moves by
+        itself, independently of the robot, this is its rate at any time, so also inside a
+        trial's window; if it is body, onsets of the arm sweeping in make it an overestimate
+        (hits count less), never an underestimate."""
+        return np.maximum(self.spontaneous_rate(params),
+                          (self.free_onsets + params.prior_onsets)
+                          / (self.t_free + params.prior_time))
+
     def chance_probability(self, params: CoincidenceParams) -> np.ndarray:
-        """``p0_j``: probability that cell j's own onsets fall in a τ_s window by chance."""
-        return -np.expm1(-self.spontaneous_rate(params) * params.trial_window)
+        """``p0_j``: probability that cell j's own onsets fall in a trial's window by chance."""
+        return -np.expm1(-self.chance_rate(params) * params.trial_window)
 
     def hold_time(self, params: CoincidenceParams) -> float:
         """Requested hold at q* (s), varied per request by a golden-ratio sequence so the
@@ -286,12 +309,20 @@ def _check_inputs(state: CoincidenceState, t: float, a: np.ndarray, sdot: np.nda
 
 
 def step(state: CoincidenceState, t: float, a: np.ndarray, sdot: np.ndarray,
-         params: CoincidenceParams = CoincidenceParams()) -> CoincidenceState:
+         params: CoincidenceParams = CoincidenceParams(),
+         known_body: np.ndarray | None = None) -> CoincidenceState:
     """One sample of the detector at time ``t`` (s): actuator values ``a`` (rad) and per-cell
-    visual change ``sdot`` (px/s). Returns the new state; ``state`` is not modified."""
+    visual change ``sdot`` (px/s). Returns the new state; ``state`` is not modified.
+
+    ``known_body`` (optional, n_c bool): cells already known to hold the body by other
+    evidence (confirmed body features, :mod:`.body_features`); like body cells, they raise no
+    confirming request, so the robot's time goes to cells still in question."""
     a = np.asarray(a, dtype=float).ravel()
     sdot = np.asarray(sdot, dtype=float).ravel()
     _check_inputs(state, t, a, sdot)
+    known = np.zeros(state.n_c, bool) if known_body is None else np.asarray(known_body, bool)
+    if known.shape != (state.n_c,):
+        raise ValueError(f"known_body needs {state.n_c} cells, got shape {known.shape}")
     s = state.copy()
     first = state.t_prev <= NEVER
     s.t_prev = np.float64(t)
@@ -324,6 +355,12 @@ def step(state: CoincidenceState, t: float, a: np.ndarray, sdot: np.ndarray,
         # rate at which a quiet cell starts moving: the chance it starts inside a trial window.
         s.t_still += dt * (t - state.last_motion_s > params.quiet_s)
         s.unexplained += onset_s
+    # The chance rate of a trial hit: onsets outside every actuator onset's window w.
+    s.t_free *= keep
+    s.free_onsets *= keep
+    if t - s.t_onset_a.max() > params.trial_window:
+        s.t_free += dt * (t - state.last_motion_s > params.quiet_s)
+        s.free_onsets += onset_s
 
     # Eq. (27), once per coincident pair of onsets.
     fired = causal_and(t, s.t_onset_a, params.tau_a, s.t_onset_s, params.tau_s)
@@ -333,7 +370,10 @@ def step(state: CoincidenceState, t: float, a: np.ndarray, sdot: np.ndarray,
     s.counted_ta = np.where(new, s.t_onset_a[:, None], s.counted_ta)
     s.counted_ts = np.where(new, s.t_onset_s[None, :], s.counted_ts)
 
-    _confirm(s, t, onset_a, new, params)
+    # A confirming trial is a new motion of the arm from rest: every actuator was still for
+    # quiet_a before this sample (another joint's late onset in the same move is no trial).
+    arm_rested = t - state.last_motion_a.max() > params.quiet_a
+    _confirm(s, t, onset_a & arm_rested, new, params, known)
     return s
 
 
@@ -347,7 +387,7 @@ def _add_evidence(s: CoincidenceState, cells: np.ndarray, hit: bool, params: Coi
 
 
 def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray,
-             params: CoincidenceParams):
+             params: CoincidenceParams, known: np.ndarray):
     """Confirming motions: raise a request, recognise its trial, score hits and misses."""
     if s.request_active and not s.trial_active:
         # Rows of q_onset for this sample's onsets all hold the posture the motion started from.
@@ -376,15 +416,16 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
         s.hits += trial_new & ~(s.trial_hit > 0) & cand[None, :]
         s.trial_hit = np.maximum(s.trial_hit, trial_new)
         hit = s.trial_hit.max(axis=0) > 0
-        # The trial ends when every candidate has responded, or when its window has closed.
-        if (hit | ~cand).all() or t - s.trial_t0 > params.tau_a + params.tau_s:
+        # The trial ends when every candidate has responded, or when the window of the latest
+        # actuator onset it can count has closed (joints of one move start within ~w).
+        if (hit | ~cand).all() or t - s.trial_t0 > params.trial_duration:
             tested_pairs = (s.cand_act > 0) & (s.trial_moved[:, None] > 0)
             miss = cand & ~hit & tested_pairs.any(axis=0)
             _add_evidence(s, miss, False, params)
             s.misses += tested_pairs & miss[None, :]
             # Cells that responded here and are not yet body are tested again at once, at the
             # same posture (a fast sequence of unselected trials).
-            follow = (s.trial_hit > 0) & ~s.body(params)[None, :]
+            follow = (s.trial_hit > 0) & ~(s.body(params) | known)[None, :]
             q = s.q_request.copy()
             _clear_request(s)
             if follow.any():
@@ -392,7 +433,7 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
         return
 
     if not s.request_active:
-        trigger = new & ~s.body(params)[None, :]
+        trigger = new & ~(s.body(params) | known)[None, :]
         if trigger.any():
             acts = np.flatnonzero(trigger.any(axis=1))
             latest = acts[np.argmax(s.t_onset_a[acts])]

@@ -12,10 +12,12 @@
   dictionary.
 - :func:`draw_likelihood_map` / :func:`save_likelihood_png`: the likelihood map over the camera
   image, like the paper's Figs. 3-5 (red: body cells, shade ~ Σ_i ε_ij; blue: cells with ṡ_j > 0).
+- :func:`draw_mask_vs_truth`: a body mask scored on the truth, as a picture.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -35,13 +37,21 @@ def cell_coverage(label_image: np.ndarray, labels: Iterable[int], grid: CellGrid
     if lab.shape != (grid.height, grid.width):
         raise ValueError(f"label image is {lab.shape[::-1]} but the grid is over "
                          f"{grid.width}x{grid.height}")
-    hit = np.isin(lab, np.asarray(list(labels), dtype=lab.dtype)).astype(float)
+    hit = np.isin(lab, np.asarray(list(labels), dtype=lab.dtype)).ravel()
+    cell, pixels = _pixel_cells(grid)
+    covered = np.bincount(cell[hit], minlength=grid.num_cells)
+    return covered / pixels
+
+
+@functools.lru_cache(maxsize=8)
+def _pixel_cells(grid: CellGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Cell index of every pixel (flat, row-major) and the pixel count of every cell; cached,
+    since it is the same for every frame of a camera."""
     rows = np.arange(grid.height) * grid.rows // grid.height
     cols = np.arange(grid.width) * grid.cols // grid.width
-    cell = rows[:, None] * grid.cols + cols[None, :]
-    covered = np.bincount(cell.ravel(), weights=hit.ravel(), minlength=grid.num_cells)
-    pixels = np.bincount(cell.ravel(), minlength=grid.num_cells)
-    return covered / pixels
+    cell = (rows[:, None] * grid.cols + cols[None, :]).ravel()
+    cell.setflags(write=False)
+    return cell, np.bincount(cell, minlength=grid.num_cells)
 
 
 @dataclass
@@ -132,48 +142,115 @@ def detection_latencies(times: np.ndarray, visible_motion: np.ndarray,
 class EpisodeEvaluator:
     """Streams one episode, frame by frame, into the metrics of issue 4 (``metrics()``).
 
-    Per frame: the label image, the detector's body mask and the tracker's ``ṡ_j``. A cell's
-    *visible motion* starts at the first frame where the robot covers at least ``body_cover`` of
-    it and ``ṡ_j > 0``. Precision, recall and IoU are of the cells ever marked body against the
+    Per frame: the label image, the scored body mask and the tracker's ``ṡ_j`` (and optionally
+    named ``parts`` of the mask, scored separately for diagnosis). A cell's *visible motion*
+    starts at the first frame where the robot covers at least ``body_cover`` of it and
+    ``ṡ_j > 0``. Precision, recall and IoU are of the cells ever marked body against the
     episode's truth (:class:`CellTruth`), so a cell marked and later unmarked still counts.
+
+    The accumulators have a fixed size (per cell: the largest body cover, distractor seen,
+    first visible motion, first mark, ever marked per part), so the evaluator streams episodes
+    of any length and round-trips through one flat vector (:meth:`to_vector`,
+    :meth:`set_vector`) that a Drake system keeps as discrete state.
     """
 
     def __init__(self, grid: CellGrid, body_labels: Iterable[int],
-                 distractor_labels: Iterable[int] = (), body_cover: float = 0.10):
+                 distractor_labels: Iterable[int] = (), body_cover: float = 0.10,
+                 parts: Iterable[str] = ()):
         self.truth = CellTruth(grid, tuple(body_labels), tuple(distractor_labels), body_cover)
-        self._times: list[float] = []
-        self._visible: list[np.ndarray] = []
-        self._marked: list[np.ndarray] = []
+        self.parts = tuple(parts)
+        n = grid.num_cells
+        self.frames = 0
+        self.first_visible = np.full(n, np.inf)
+        self.first_marked = np.full(n, np.inf)
+        self.ever_marked = np.zeros(n, bool)
+        self.ever_part = np.zeros((len(self.parts), n), bool)
+
+    def vector_size(self) -> int:
+        return 1 + (5 + len(self.parts)) * self.truth.grid.num_cells
+
+    def to_vector(self) -> np.ndarray:
+        """The accumulators as one flat vector (times never seen stored as -1)."""
+        def times(x):
+            return np.where(np.isfinite(x), x, -1.0)
+        return np.concatenate([[self.frames], self.truth.max_body_cover,
+                               self.truth.distractor_seen, times(self.first_visible),
+                               times(self.first_marked), self.ever_marked,
+                               self.ever_part.ravel()]).astype(float)
+
+    def set_vector(self, vector: np.ndarray) -> None:
+        """Restores the accumulators from :meth:`to_vector`'s output."""
+        v = np.asarray(vector, dtype=float).ravel()
+        if v.size != self.vector_size():
+            raise ValueError(f"evaluator vector has {v.size} entries, expected "
+                             f"{self.vector_size()}")
+        n = self.truth.grid.num_cells
+        self.frames = int(v[0])
+        rows = v[1:].reshape(5 + len(self.parts), n)
+        self.truth.max_body_cover = rows[0].copy()
+        self.truth.distractor_seen = rows[1] > 0
+        self.first_visible = np.where(rows[2] >= 0, rows[2], np.inf)
+        self.first_marked = np.where(rows[3] >= 0, rows[3], np.inf)
+        self.ever_marked = rows[4] > 0
+        self.ever_part = rows[5:] > 0
 
     def update(self, time: float, label_image: np.ndarray, body_mask: np.ndarray,
-               sdot: np.ndarray) -> None:
+               sdot: np.ndarray, parts: dict | None = None) -> None:
         n = self.truth.grid.num_cells
         body_mask = np.asarray(body_mask).ravel() > 0
         sdot = np.asarray(sdot, dtype=float).ravel()
         if body_mask.shape != (n,) or sdot.shape != (n,):
             raise ValueError(f"expected {n} cells, got mask {body_mask.shape}, sdot {sdot.shape}")
+        parts = {} if parts is None else parts
+        if set(parts) != set(self.parts):
+            raise ValueError(f"expected mask parts {sorted(self.parts)}, got {sorted(parts)}")
+        part_masks = [np.asarray(parts[name]).ravel() > 0 for name in self.parts]
+        if any(m.shape != (n,) for m in part_masks):
+            raise ValueError(f"expected {n} cells in every mask part")
+        if not np.isfinite(time) or time < 0:
+            raise ValueError(f"frame time must be finite and >= 0, got {time}")
         cover = self.truth.update(label_image)
-        self._times.append(float(time))
-        self._visible.append((cover >= self.truth.body_cover) & (sdot > 0))
-        self._marked.append(body_mask)
+        visible = (cover >= self.truth.body_cover) & (sdot > 0)
+        self.first_visible = np.where(visible, np.minimum(self.first_visible, time),
+                                      self.first_visible)
+        self.first_marked = np.where(body_mask, np.minimum(self.first_marked, time),
+                                     self.first_marked)
+        self.ever_marked |= body_mask
+        for k, mask in enumerate(part_masks):
+            self.ever_part[k] |= mask
+        self.frames += 1
 
-    def metrics(self) -> dict:
-        if not self._times:
-            raise ValueError("no frames to evaluate")
-        marked = np.array(self._marked)
-        ever = marked.any(axis=0)
-        latencies = detection_latencies(np.array(self._times), np.array(self._visible), marked)
+    def latencies(self) -> np.ndarray:
+        """Per cell with visible robot motion that was detected: first mark minus first visible
+        motion (0 if marked before), as :func:`detection_latencies`."""
+        both = np.isfinite(self.first_visible) & np.isfinite(self.first_marked)
+        return np.maximum(0.0, self.first_marked[both] - self.first_visible[both])
+
+    def _mask_summary(self, ever: np.ndarray) -> dict:
         out = mask_metrics(ever, self.truth.truth())
         out.update({
-            "frames": len(self._times),
-            "body_cells_true": int(np.sum(self.truth.truth() == BODY)),
             "body_cells_marked": int(ever.sum()),
-            "distractor_cells": int(self.truth.distractor_cells().sum()),
             "distractor_cells_marked": distractor_cells_marked(
                 ever, self.truth.distractor_cells()),
+        })
+        return out
+
+    def metrics(self) -> dict:
+        if not self.frames:
+            raise ValueError("no frames to evaluate")
+        latencies = self.latencies()
+        out = self._mask_summary(self.ever_marked)
+        out.update({
+            "frames": self.frames,
+            "body_cells_true": int(np.sum(self.truth.truth() == BODY)),
+            "distractor_cells": int(self.truth.distractor_cells().sum()),
             "latency_median_s": float(np.median(latencies)) if latencies.size else None,
+            "latency_p90_s": float(np.percentile(latencies, 90)) if latencies.size else None,
             "latency_cells": int(latencies.size),
         })
+        if self.parts:
+            out["parts"] = {name: self._mask_summary(self.ever_part[k])
+                            for k, name in enumerate(self.parts)}
         return out
 
 
@@ -211,6 +288,40 @@ def draw_likelihood_map(image: np.ndarray, grid: CellGrid, eps: np.ndarray,
 def save_likelihood_png(path, image: np.ndarray, grid: CellGrid, eps: np.ndarray,
                         body: np.ndarray, sdot: np.ndarray | None = None) -> None:
     """Write :func:`draw_likelihood_map` to ``path`` as PNG."""
-    rgb = draw_likelihood_map(image, grid, eps, body, sdot)
-    if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
-        raise ValueError(f"could not write {path}")
+    save_png(path, draw_likelihood_map(image, grid, eps, body, sdot))
+
+
+def save_png(path, rgb: np.ndarray) -> None:
+    """Write an RGB uint8 picture to ``path`` as PNG."""
+    with open(path, "wb") as f:
+        f.write(png_bytes(rgb))
+
+
+def png_bytes(rgb: np.ndarray) -> bytes:
+    """An RGB uint8 picture encoded as PNG (to be written atomically by the caller)."""
+    ok, data = cv2.imencode(".png", cv2.cvtColor(np.asarray(rgb), cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise ValueError("could not encode the picture as PNG")
+    return data.tobytes()
+
+
+def draw_mask_vs_truth(image: np.ndarray, grid: CellGrid, marked: np.ndarray,
+                       truth: np.ndarray, distractor: np.ndarray | None = None) -> np.ndarray:
+    """RGB uint8 picture of a body mask scored on the truth: true positives shaded green,
+    false positives red, missed body cells outlined yellow, distractor cells outlined blue."""
+    out = draw_likelihood_map(image, grid, np.zeros(grid.num_cells),
+                              np.zeros(grid.num_cells, bool)).astype(float)
+    marked = np.asarray(marked, bool).ravel()
+    truth = np.asarray(truth).ravel()
+    for j, color in [(j, (0.0, 200.0, 0.0)) for j in np.flatnonzero(marked & (truth == BODY))] + [
+            (j, (255.0, 0.0, 0.0)) for j in np.flatnonzero(marked & (truth == BACKGROUND))]:
+        u0, v0, u1, v1 = grid.cell_bounds(j)
+        out[v0:v1, u0:u1] = 0.5 * out[v0:v1, u0:u1] + 0.5 * np.array(color)
+    out = np.clip(out, 0, 255).astype(np.uint8)
+    outlines = [(j, (255, 255, 0)) for j in np.flatnonzero(~marked & (truth == BODY))]
+    if distractor is not None:
+        outlines += [(j, (0, 0, 255)) for j in np.flatnonzero(np.asarray(distractor, bool))]
+    for j, color in outlines:
+        u0, v0, u1, v1 = grid.cell_bounds(j)
+        cv2.rectangle(out, (u0, v0), (u1 - 1, v1 - 1), color, 1)
+    return out

@@ -17,6 +17,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from sustain_drake.perception.body_features import (
     FeatureMemory,
     FeatureParams,
+    body_feature_cells,
     features_on_body,
     update_feature_memory,
 )
@@ -78,6 +79,8 @@ class MotionCoincidenceDetector(LeafSystem):
     - ``feature_on_body``: :class:`FeatureBodyFlags` for the features on the input.
     - ``body_feature_cells``: 1 for cells that hold at least one body feature now (size
       ``n_c``): the body where it is now, as the arm carries its confirmed features around.
+      With ``FeatureParams.skip_known_cells`` these cells raise no confirming request (their
+      body is already known), so the confirming motions go to cells still in question.
     - ``confirm_posture``: ``q*`` (rad, size ``n_a``): the posture at the onset of the actuator
       motion that raised the current confirming request; the last one when none is active.
     - ``confirm_request``: ``[active (0/1), count, hold (s)]``. When ``count`` increases, the
@@ -156,11 +159,17 @@ class MotionCoincidenceDetector(LeafSystem):
 
     def _update(self, context, state):
         t = context.get_time()
+        has_features = self._features.HasValue(context)
+        known = None
+        if has_features and self._feature_params.skip_known_cells:
+            f = self._features.Eval(context)
+            known = body_feature_cells(self.feature_memory(context), f.ids, f.cell, self._n_c,
+                                       self._feature_params)
         new = step(self.detector_state(context), t, self._a.Eval(context),
-                   self._sdot.Eval(context), self._params)
+                   self._sdot.Eval(context), self._params, known)
         state.get_mutable_discrete_state().get_mutable_vector(self._state_index).SetFromVector(
             new.to_vector())
-        if self._features.HasValue(context):
+        if has_features:
             f = self._features.Eval(context)
             memory = update_feature_memory(self.feature_memory(context), new, t, f.ids, f.cell,
                                            f.flow_px, self._feature_params)
@@ -170,9 +179,8 @@ class MotionCoincidenceDetector(LeafSystem):
         cells = np.zeros(self._n_c)
         if self._features.HasValue(context):
             f = self._features.Eval(context)
-            on = features_on_body(self.feature_memory(context), f.ids, self._feature_params)
-            cell = np.asarray(f.cell, np.int64)[on]
-            cells[cell[(cell >= 0) & (cell < self._n_c)]] = 1.0
+            cells = body_feature_cells(self.feature_memory(context), f.ids, f.cell, self._n_c,
+                                       self._feature_params).astype(float)
         output.SetFromVector(cells)
 
     def _calc_feature_on_body(self, context, output):

@@ -1,0 +1,92 @@
+"""Body detection end to end over several seeds (issue 4 targets), through the code path of
+``sustain-drake simulate SCENARIO --seed N`` (``simulate_scenario``).
+
+    .venv/bin/python bench/bench_body_detection.py [--seeds 1 2 3 4 5] [--jobs 2]
+
+Each seed is one run of ``diagrams/body_detection.yaml`` (60 s, the walking person) with the
+seed overriding the motion, the sensor noise and the person's start; its outputs go to
+``--out/seed_N/`` (metrics.json, likelihood maps). Prints one row per seed and the aggregate,
+and checks the targets: precision >= 0.95, recall >= 0.8, 0 distractor cells marked body,
+median detection latency <= 1 s. Writes the table to ``--out/summary.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from sustain_drake.cli.common import write_atomically  # noqa: E402
+from sustain_drake.cli.simulate import simulate_scenario  # noqa: E402
+
+TARGETS = {"precision": (">=", 0.95), "recall": (">=", 0.8),
+           "distractor_cells_marked": ("==", 0), "latency_median_s": ("<=", 1.0)}
+COLUMNS = ("precision", "recall", "iou", "distractor_cells_marked", "latency_median_s",
+           "body_cells_true", "body_cells_marked", "distractor_cells")
+
+
+def run_seed(scenario: Path, seed: int, out: Path, duration: float | None) -> dict:
+    result = simulate_scenario(scenario, duration=duration, out=out / f"seed_{seed}",
+                               replay=False, seed=seed)
+    metrics = json.loads(result.metrics.read_text())
+    m = metrics["body_detection"]
+    row = {name: m[name] for name in COLUMNS}
+    row.update(seed=seed, wall_s=result.wall, features_on_body=m["detector"]["features_on_body"],
+               confirm_trials=m["detector"]["confirm_trials"],
+               recall_cells=m["parts"]["cells"]["recall"],
+               recall_features=m["parts"]["features"]["recall"])
+    return row
+
+
+def meets(value, op: str, bound: float) -> bool:
+    if value is None:
+        return False
+    return {">=": value >= bound, "<=": value <= bound, "==": value == bound}[op]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--scenario", type=Path, default=ROOT / "diagrams" / "body_detection.yaml")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
+    p.add_argument("--jobs", type=int, default=1, help="seeds simulated in parallel")
+    p.add_argument("--out", type=Path, default=ROOT / "out" / "bench_body_detection")
+    args = p.parse_args(argv)
+
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        rows = list(pool.map(run_seed, [args.scenario] * len(args.seeds), args.seeds,
+                             [args.out] * len(args.seeds), [args.duration] * len(args.seeds)))
+    header = ("seed", "precision", "recall", "iou", "distr.", "latency", "true", "marked",
+              "recall cells/features", "wall")
+    print(" | ".join(header))
+    for r in rows:
+        latency = "n/a" if r["latency_median_s"] is None else f"{r['latency_median_s']:.2f} s"
+        print(f"{r['seed']} | {r['precision']:.3f} | {r['recall']:.3f} | {r['iou']:.3f} | "
+              f"{r['distractor_cells_marked']} of {r['distractor_cells']} | {latency} | "
+              f"{r['body_cells_true']} | {r['body_cells_marked']} | "
+              f"{r['recall_cells']:.2f} / {r['recall_features']:.2f} | {r['wall_s']:.0f} s")
+    summary = {"seeds": args.seeds, "rows": rows, "aggregate": {}, "targets": {}}
+    for name, (op, bound) in TARGETS.items():
+        values = [r[name] for r in rows]
+        known = [v for v in values if v is not None]
+        agg = {"min": min(known) if known else None, "median": statistics.median(known)
+               if known else None, "max": max(known) if known else None}
+        ok = all(meets(v, op, bound) for v in values)
+        summary["aggregate"][name] = agg
+        summary["targets"][name] = {"target": f"{op} {bound:g}", "met_on_every_seed": ok,
+                                    "seeds_met": sum(meets(v, op, bound) for v in values)}
+        print(f"{name}: min {agg['min']}, median {agg['median']}, max {agg['max']} "
+              f"(target {op} {bound:g}: met on {summary['targets'][name]['seeds_met']} of "
+              f"{len(values)} seeds)")
+    write_atomically(args.out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
