@@ -12,7 +12,7 @@ from sustain_drake.identification.candidates import CandidateBank, CandidatePara
 from sustain_drake.identification.eye_to_hand import default_criteria, pack_x
 
 CRITERIA = default_criteria()
-PARAMS = CandidateParams()
+PARAMS = CandidateParams(confirm_with_witness=False)  # one point suffices (the paper's rule)
 DT = 1.0 / 30.0
 TRUTH = make_truth(5)
 
@@ -20,7 +20,8 @@ TRUTH = make_truth(5)
 def hand_pose(k):
     """A smooth, rich hand motion (rotation about all axes, 0.2 m of travel)."""
     t = k * DT
-    R = Rotation.from_rotvec(0.5 * np.array([math.sin(0.9 * t), math.sin(1.3 * t + 1), math.sin(0.7 * t + 2)]))
+    angles = [math.sin(0.9 * t), math.sin(1.3 * t + 1), math.sin(0.7 * t + 2)]
+    R = Rotation.from_rotvec(0.5 * np.array(angles))
     X = np.eye(4)
     X[:3, :3] = R.as_matrix()
     X[:3, 3] = [0.4 + 0.1 * math.sin(0.5 * t), 0.1 * math.sin(0.8 * t), 0.3 + 0.1 * math.sin(1.1 * t)]
@@ -79,7 +80,7 @@ def test_hand_point_leads_another_link_never_converges():
 
 
 def test_other_link_alone_is_never_adopted_and_is_rejected_in_time():
-    params = CandidateParams(max_unconverged_time=5.0)
+    params = CandidateParams(max_unconverged_time=5.0, confirm_with_witness=False)
 
     def frames(k, X, rng):
         if k >= 300:
@@ -118,7 +119,7 @@ def test_a_lost_feature_stops_feeding_and_nothing_false_is_adopted():
         valid = k < 5 or k >= 100  # occluded (no depth) from frame 5 to 99
         return [4], [seen(X, P_TOOL, rng) if valid else np.zeros(3)], [valid], [True]
 
-    bank, _ = run(frames, params=CandidateParams(max_lost_time=10.0))
+    bank, _ = run(frames, params=CandidateParams(max_lost_time=10.0, confirm_with_witness=False))
     c = bank.find(4)
     assert c.solution.num_samples == 5 + 20 and bank.leader == -1  # 25 samples, no gate yet ...
     # ... and with the default max_lost_time (2 s) the occluded candidate was dropped.
@@ -146,8 +147,9 @@ def test_motion_gate_skips_a_jump():
 
     bank, _ = run(frames)
     assert bank.find(1).solution.num_samples == 28  # frames 20 (the jump) and 21 (back) skipped
-    assert candidates.within_motion_gate(np.zeros(3), np.eye(4), np.array([0.005, 0, 0]), np.eye(4), PARAMS)
-    assert not candidates.within_motion_gate(np.zeros(3), np.eye(4), np.array([0.05, 0, 0]), np.eye(4), PARAMS)
+    still = np.eye(4)
+    assert candidates.within_motion_gate(np.zeros(3), still, np.array([0.005, 0, 0]), still, PARAMS)
+    assert not candidates.within_motion_gate(np.zeros(3), still, np.array([0.05, 0, 0]), still, PARAMS)
 
 
 def test_reset_drops_every_candidate_and_a_new_round_starts():
@@ -173,7 +175,8 @@ def test_observation_uses_the_reference_and_reacquires_a_lost_point():
             return [9], [seen(X, P_TOOL, rng)], [True], [True]
         # The track of the point is lost; a new track (id 12) of the same point and a body feature
         # elsewhere (id 11) appear.
-        return [11, 12], [seen(X, P_TOOL + [0.1, 0, 0], rng), seen(X, P_TOOL, rng)], [True, True], [True, True]
+        points = [seen(X, P_TOOL + [0.1, 0, 0], rng), seen(X, P_TOOL, rng)]
+        return [11, 12], points, [True, True], [True, True]
 
     bank, _ = run(frames, reference=x_true)
     assert bank.leader == 9 and bank.observed == 12
@@ -185,6 +188,137 @@ def test_observation_uses_the_reference_and_reacquires_a_lost_point():
 
     bank, _ = run(moved, bank, reference=x_true, start=420)
     assert bank.sample_count == count + 5 and bank.sample_error > 1e-3
+
+
+HANDOVER = CandidateParams(observe_min_samples=50, confirm_with_witness=False)
+
+
+def test_a_lost_observed_point_hands_over_to_a_consistent_candidate():
+    # Features 9 (the tool point) and 4 (another point of the hand, noisier) are candidates from the start;
+    # 7 is on another link. 9 leads; when its track is lost, 4 (consistent with the adopted camera)
+    # takes over the observation with its own p_HP; 7 never does.
+    p4 = P_TOOL + [0.03, -0.02, 0.04]
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+
+    def frames(k, X, rng):
+        if k >= 460:
+            return None
+        X_L, p = other_link(X, k, P_OTHER)
+        ids, points = [4, 7], [seen(X, p4, rng, noise=1e-3), seen(X_L, p, rng)]
+        if k < 400:
+            ids, points = ids + [9], points + [seen(X, P_TOOL, rng)]
+        return ids, points, [True] * len(ids), [True] * len(ids)
+
+    bank, _ = run(frames, reference=x_true, params=HANDOVER)
+    assert bank.leader == 9 and bank.observed == 4
+    assert np.linalg.norm(bank.observed_p_HP - p4) < 3e-3
+    assert bank.sample_error < 3e-5  # the hand-over point is observed with its own p_HP (1 mm noise)
+
+    def only_other_link(k, X, rng):
+        if k >= 460:
+            return None
+        X_L, p = other_link(X, k, P_OTHER)
+        ids, points = [7], [seen(X_L, p, rng)]
+        if k < 400:
+            ids, points = ids + [9], points + [seen(X, P_TOOL, rng)]
+        return ids, points, [True] * len(ids), [True] * len(ids)
+
+    bank, _ = run(only_other_link, reference=x_true, params=HANDOVER)
+    assert bank.leader == 9 and bank.observed == -1
+
+
+def test_a_witness_tells_a_sliding_track_from_a_change_of_the_body():
+    # 9 leads and is observed, 4 (another point of the hand) is its witness. From frame 400 the
+    # track of 9 slides away from its point (1 mm per frame): a tracking failure, the reported s_t
+    # stays small and 4 takes over. From frame 470 the point 4 moves (the tool slipped): s_t is large.
+    p4 = P_TOOL + [0.03, -0.02, 0.04]
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+    sigma = 1e-4
+    params = CandidateParams(observe_min_samples=50, confirm_with_witness=False)
+    errors = []
+
+    def frames(k, X, rng):
+        if k >= 480:
+            return None
+        slide = max(k - 400, 0) * 1e-3
+        slip = np.array([0.05, 0, 0]) if k >= 470 else np.zeros(3)
+        points = [seen(X, p4 + slip, rng, noise=1e-3), seen(X, P_TOOL, rng) + [slide, 0, 0]]
+        return [4, 9], points, [True, True], [True, True]
+
+    bank = CandidateBank()
+    rng = np.random.default_rng(3)
+    for k in range(480):
+        X = hand_pose(k)
+        ids, points, valid, body = frames(k, X, rng)
+        bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids),
+                               np.array(points), np.array(valid), np.array(body), x_true,
+                               allowable_error=sigma)
+        errors.append(bank.sample_error)
+        if k == 399:
+            assert bank.leader == 9 and bank.observed == 9 and bank.witness == 4
+    errors = np.array(errors)
+    assert np.all(errors[400:470] < sigma)  # the sliding track never counts as a violation
+    assert bank.observed == 4
+    assert np.all(errors[471:] > 1e-3)  # the slip does
+
+
+def test_after_a_slip_the_previous_camera_is_kept_and_only_p_HP_is_new():
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+    slipped = P_TOOL + [0.0, 0.03, 0.04]
+
+    def before(k, X, rng):
+        return None if k >= 200 else ([9], [seen(X, P_TOOL, rng)], [True], [True])
+
+    bank, k = run(before, reference=x_true)
+    assert bank.leader == 9 and bank.adoptions[-1].kind == "identified"
+
+    def after(k, X, rng):  # reset at frame 200 (a change was detected); the point has slipped
+        return None if k >= 320 else ([9], [seen(X, slipped, rng)], [True], [True])
+
+    params = CandidateParams(observe_min_samples=30, confirm_with_witness=False)
+    bank, _ = run(after, bank, reset=1.0, reference=x_true, start=k, params=params)
+    last = bank.adoptions[-1]
+    assert last.kind == "previous camera" and bank.leader == 9
+    assert last.time == pytest.approx((200 + 30 - 1) * DT)  # as soon as it has 30 samples
+    assert np.allclose(last.estimate.p_WC, TRUTH.X_WC[:3, 3])
+    assert np.linalg.norm(last.estimate.p_HP - slipped) < 2e-3
+
+    # A moved camera: the previous one explains nothing, the full identification is needed.
+    moved = make_truth(6)
+
+    def camera_moved(k, X, rng):
+        if k >= 560:
+            return None
+        p_W = X[:3, :3] @ P_TOOL + X[:3, 3]
+        p_C = moved.X_WC[:3, :3].T @ (p_W - moved.X_WC[:3, 3]) + rng.normal(0, 5e-4, 3)
+        return [9], [p_C], [True], [True]
+
+    bank, _ = run(camera_moved, bank, reset=2.0, reference=x_true, start=320, params=params)
+    last = bank.adoptions[-1]
+    assert last.kind == "identified" and last.time > 320 * DT
+    assert np.linalg.norm(last.estimate.p_WC - moved.X_WC[:3, 3]) < 5e-3
+
+
+def test_a_camera_is_adopted_only_when_a_second_point_agrees():
+    params = CandidateParams(observe_min_samples=50)  # confirm_with_witness by default
+    p4 = P_TOOL + [0.03, -0.02, 0.04]
+
+    def alone_with_other_link(k, X, rng):
+        if k >= 300:
+            return None
+        X_L, p = other_link(X, k, P_OTHER)
+        return [7, 9], [seen(X_L, p, rng), seen(X, P_TOOL, rng)], [True, True], [True, True]
+
+    bank, _ = run(alone_with_other_link, params=params)
+    assert bank.find(9).solution.verdict.converged and bank.leader == -1  # nobody confirms it
+
+    def two_hand_points(k, X, rng):
+        if k >= 300:
+            return None
+        return [4, 9], [seen(X, p4, rng, noise=1e-3), seen(X, P_TOOL, rng)], [True, True], [True, True]
+
+    bank, _ = run(two_hand_points, params=params)
+    assert bank.leader == 9 and bank.adoptions[0].time >= 49 * DT  # once 4 has 50 samples
 
 
 def test_params_validation():

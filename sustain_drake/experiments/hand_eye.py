@@ -30,7 +30,7 @@ from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import best_p_HP_given_camera
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
-from sustain_drake.station import camera_info
+from sustain_drake.station import ScenarioError, camera_info
 from sustain_drake.station.scenario import ARM_JOINTS, HeadMove, ToolSlip
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
@@ -59,20 +59,39 @@ class HandEyeHandle:
 def build_loop(builder, station, scenario):
     """Adds tracker, detector, candidates and state machine wired to ``station`` (its image,
     encoder, ``X_WH`` outputs and ``motion_confirm``/``motion_pause`` inputs). Returns them."""
-    config = scenario.hand_eye
+    config, perception = scenario.hand_eye, scenario.body_detection
+    if not (station.HasOutputPort("color_image") and station.HasOutputPort("depth_image")):
+        raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
+    try:
+        criteria, rule = config.coordination.criteria(), config.coordination.rule()
+        candidate_params = config.candidates.params()
+        coincidence_params = perception.coincidence_params()
+        feature_params, tracker_params = perception.feature_params(), perception.tracker_params()
+    except ValueError as e:
+        raise ScenarioError(f"hand_eye: {e}") from None
     period = 1.0 / scenario.camera.fps
-    tracker = builder.AddSystem(OpticalFlowTracker(camera_info(scenario), period=period))
-    detector = builder.AddSystem(
-        MotionCoincidenceDetector(len(ARM_JOINTS), tracker.grid.num_cells, period=period))
-    formulation = EyeToHandFormulation(config.coordination.criteria(), config.coordination.forgetting_factor)
-    candidates = builder.AddSystem(CandidateIdentifiers(formulation, config.candidates.params(), period))
-    machine = builder.AddSystem(CoordinationStateMachine(16, config.coordination.rule(), period))
+    # Tracker and detector as in the body_detection experiment (its scenario section's settings,
+    # its offsets: the tracker a quarter frame after the camera samples, the detector half a frame).
+    tracker = builder.AddSystem(OpticalFlowTracker(
+        camera_info(scenario), (perception.grid_rows, perception.grid_cols), period=period,
+        offset=0.25 * period, params=tracker_params))
+    tracker.set_name("optical_flow_tracker")
+    detector = builder.AddSystem(MotionCoincidenceDetector(
+        len(ARM_JOINTS), tracker.grid.num_cells, period=period, offset=0.5 * period,
+        params=coincidence_params, feature_params=feature_params))
+    detector.set_name("motion_coincidence_detector")
+    formulation = EyeToHandFormulation(criteria, config.coordination.forgetting_factor)
+    candidates = builder.AddSystem(CandidateIdentifiers(formulation, candidate_params, period))
+    candidates.set_name("candidate_identifiers")
+    machine = builder.AddSystem(CoordinationStateMachine(16, rule, period))
+    machine.set_name("coordination_state_machine")
     for name in ("color_image", "depth_image", "image_time"):
         builder.Connect(station.GetOutputPort(name), tracker.GetInputPort(name))
     builder.Connect(station.GetOutputPort("joint_positions"), detector.GetInputPort("actuator_positions"))
     builder.Connect(tracker.GetOutputPort("visual_change"), detector.GetInputPort("visual_change"))
     builder.Connect(tracker.GetOutputPort("tracked_features"), detector.GetInputPort("tracked_features"))
-    builder.Connect(detector.GetOutputPort("confirm"), station.GetInputPort("motion_confirm"))
+    if perception.confirm:  # the detector's confirming motions (paper §3.3), as in body_detection
+        builder.Connect(detector.GetOutputPort("confirm"), station.GetInputPort("motion_confirm"))
     builder.Connect(tracker.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
     builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
@@ -80,6 +99,7 @@ def build_loop(builder, station, scenario):
     builder.Connect(candidates.GetOutputPort("observation"), machine.GetInputPort("observation"))
     builder.Connect(machine.GetOutputPort("adopted_x"), candidates.GetInputPort("reference_x"))
     builder.Connect(machine.GetOutputPort("reset"), candidates.GetInputPort("reset"))
+    builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     return tracker, detector, candidates, machine
 
@@ -207,14 +227,17 @@ def evaluate(handle, diagram, context) -> dict:
         a = bank.adoptions[k]
         identifier = EyeToHandIdentifier(config.coordination.forgetting_factor, criteria)
         identifier.set_state(a.statistic)
-        est = identifier.solve(refine_estimate=True).estimate
+        est = a.estimate
         X_WC = _at(t_pose, X_WC_log, t).reshape(4, 4)
         p_true = best_p_HP_given_camera(a.statistic, X_WC[:3, :3], X_WC[:3, 3])
         rod_tip = _at(t_pose, p_HP_log, t)
         adopted.append({
-            "time_s": t, "feature_id": a.feature_id, "candidate_found_s": a.admitted,
+            "time_s": t, "feature_id": a.feature_id, "kind": a.kind, "candidate_found_s": a.admitted,
             "round_start_s": a.round_start, "num_samples": identifier.num_samples,
             "camera_position_error_mm": 1e3 * float(np.linalg.norm(est.p_WC - X_WC[:3, 3])),
+            # Along the optical axis (+: the estimate is in front of the true camera) and across it:
+            # a depth camera sees the near surface of the tool, not the tracked corner's axis.
+            "camera_position_error_along_axis_mm": 1e3 * float((est.p_WC - X_WC[:3, 3]) @ X_WC[:3, 2]),
             "camera_rotation_error_deg": math.degrees(rotation_angle(est.R_WC.T @ X_WC[:3, :3])),
             "tool_point_error_mm": 1e3 * float(np.linalg.norm(est.p_HP - p_true)),
             "tool_point_distance_to_rod_tip_mm": 1e3 * float(np.linalg.norm(est.p_HP - rod_tip)),

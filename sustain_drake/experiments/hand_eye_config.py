@@ -19,6 +19,14 @@ class CandidatesConfig:
     max_lost_time: float = 2.0
     max_unconverged_time: float = 30.0
     reacquire_radius: float = 0.01
+    reject_rms: float = 0.02
+    use_body_cells: bool = True
+    observation_jump: float = 0.15
+    observe_min_samples: int = 100
+    observe_consistency: float = 3.0
+    primary_failures: int = 10
+    keep_camera: bool = True
+    confirm_with_witness: bool = True
 
     def params(self) -> CandidateParams:
         return CandidateParams(**dataclasses.asdict(self))

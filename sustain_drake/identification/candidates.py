@@ -40,9 +40,19 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, EyeToHandSolution, build_A
+from sustain_drake.identification.eye_to_hand import (
+    EyeToHandEstimate,
+    EyeToHandIdentifier,
+    EyeToHandSolution,
+    build_A,
+    pack_x,
+)
 from sustain_drake.identification.rotation import rotation_angle
-from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, SustainableIdentifier
+from sustain_drake.identification.sustainable_identifier import (
+    ConvergenceCriteria,
+    SustainableIdentifier,
+    Verdict,
+)
 
 
 @dataclass(frozen=True)
@@ -57,6 +67,26 @@ class CandidateParams:
         max_lost_time: s without a sample before a candidate's slot is freed.
         max_unconverged_time: s after admission before a candidate that has not converged is
             rejected (until the next reset).
+        reject_rms: m; a candidate with enough samples (the criteria's ``min_samples``) whose
+            expected RMS error is above this is rejected at once (not a point of the hand).
+        use_body_cells: also admit features that lie in a body cell (after the confirmed body
+            features): the hand formulation rejects the background corners among them.
+        observation_jump: m; an observed point that moves more than the motion gate plus this
+            between two frames is a tracking failure (the track jumped to the background, a depth
+            hole): the observed feature is dropped and re-acquired, the sample is no evidence.
+        observe_min_samples, observe_consistency: when the observed point is lost and not
+            re-acquired, another candidate with at least ``observe_min_samples`` samples takes
+            over the observation if its samples, under the adopted camera and its own best
+            ``p_HP`` (least squares from its statistic), have an RMS error at most
+            ``observe_consistency`` times the adopted one's.
+        primary_failures: samples the observed point alone violates the allowable error (its
+            witness does not) before it is taken for a tracking failure and the witness replaces it.
+        keep_camera: after a reset, a candidate with ``observe_min_samples`` samples that the
+            abandoned model's camera explains (``observe_consistency``) leads at once with that
+            camera and its own ``p_HP`` (a slipped tool: only the tool point changed).
+        confirm_with_witness: a converged candidate leads only if another candidate (with at least
+            ``observe_min_samples`` samples) is explained by its camera within
+            ``observe_consistency``: a wrong camera that happens to fit one track is not adopted.
         reacquire_radius: m, how near the adopted estimate's prediction a body feature must be to
             take over the observation of a lost observed feature.
         pose_tolerance: s, how far the nearest hand pose may be from a frame's capture time.
@@ -69,12 +99,22 @@ class CandidateParams:
     max_unconverged_time: float = 30.0
     reacquire_radius: float = 0.01
     pose_tolerance: float = 0.01
+    reject_rms: float = 0.02
+    use_body_cells: bool = True
+    observation_jump: float = 0.15
+    observe_min_samples: int = 100
+    observe_consistency: float = 3.0
+    primary_failures: int = 10
+    keep_camera: bool = True
+    confirm_with_witness: bool = True
 
     def __post_init__(self):
+        if not (self.observe_min_samples >= 1 and self.primary_failures >= 1):
+            raise ValueError(f"observe_min_samples and primary_failures must be >= 1 ({self})")
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
         for name in ("max_hand_radius", "gate_margin", "max_lost_time", "max_unconverged_time",
-                     "reacquire_radius", "pose_tolerance"):
+                     "reacquire_radius", "pose_tolerance", "reject_rms", "observation_jump"):
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a positive number, got {value}")
@@ -95,13 +135,18 @@ class Candidate:
 
 @dataclass(frozen=True)
 class Adoption:
-    """A leader chosen (what the state machine adopts): when, which feature, its statistic."""
+    """A leader chosen (what the state machine adopts): when, which feature, its statistic, the
+    estimate, and how it was identified (``"identified"``: all 16 unknowns, the paper's verdict;
+    ``"previous camera"``: the camera of the model abandoned at the last reset explains the
+    candidate's samples, only its ``p_HP`` is new)."""
 
     time: float
     feature_id: int
     statistic: np.ndarray
     admitted: float  # s, when this candidate was admitted
     round_start: float  # s, when the first candidate of this identification round was admitted
+    estimate: EyeToHandEstimate | None = None
+    kind: str = "identified"
 
 
 @dataclass(frozen=True)
@@ -135,6 +180,14 @@ class CandidateBank:
     poses: tuple = ()
     adoptions: tuple = ()
     round_start: float = math.nan
+    observed_last: tuple | None = None  # (p_CP, X_WH) of the observed feature's last frame
+    observed_p_HP: np.ndarray | None = None  # the observed point in H when not the leader's own
+    witness: int = -1  # a second observed feature (see ``step``), -1: none
+    witness_p_HP: np.ndarray | None = None
+    witness_last: tuple | None = None
+    primary_failures: int = 0  # consecutive samples the observed point alone violated
+    adopted_mse: float = math.inf  # a^2 lambda_N of the leader when it was chosen, m^2
+    previous_x: np.ndarray | None = None  # the model abandoned at the last reset (Eq. (36))
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -212,6 +265,8 @@ def step(
     on_body: np.ndarray,
     reference_x: np.ndarray | None = None,
     forgetting_factor: float = 1.0,
+    in_body_cell: np.ndarray | None = None,
+    allowable_error: float = math.inf,
 ) -> CandidateBank:
     """One tick at ``time``: the reset, the hand pose, then (on a new frame) admission, feeding,
     loss, the leader and the observation. Returns the new bank.
@@ -222,12 +277,19 @@ def step(
         frame_time: the capture time of the features below (s).
         ids, p_CP, valid, on_body: per tracked feature (same order): id, point in the camera frame
             (m), whether the point is measured, whether the feature is body.
+        in_body_cell: per tracked feature, whether it lies in a body cell (None: no such
+            candidates).
+        allowable_error: the state machine's sigma (m^2), to tell a tracking failure of the
+            observed point from a change of the body (inf: never).
         reference_x: the adopted estimate (Eq. (36)); zeros or None before one. ``s_t`` of the
             observed feature is computed under it (under the leader's own estimate if unset).
     """
     if reset != bank.last_reset:
-        bank = replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(),
-                       last_reset=float(reset), round_start=math.nan)
+        previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) else None
+        bank = replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
+                       last_reset=float(reset), round_start=math.nan,
+                       observed_last=None, observed_p_HP=None,
+                       witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0)
     bank = record_pose(bank, time, X_WH)
     if not frame_time > bank.last_frame:
         return bank  # no new frame (or none yet)
@@ -238,60 +300,109 @@ def step(
     p_CP = np.asarray(p_CP, dtype=float).reshape(-1, 3)
     usable = np.asarray(valid, bool).ravel() & np.all(np.isfinite(p_CP), axis=1)
     on_body = np.asarray(on_body, bool).ravel()
+    in_body_cell = (np.zeros_like(on_body) if in_body_cell is None or not params.use_body_cells
+                    else np.asarray(in_body_cell, bool).ravel())
     row = {int(i): k for k, i in enumerate(ids)}
     rejected = frozenset(i for i in bank.rejected if i in row)
 
-    # Feed (only before a leader exists: then the leader alone keeps feeding), drop lost ones.
+    # Candidates are fed while searching: before a leader exists, or when the observed point is
+    # lost (a new point to observe). Otherwise the leader alone keeps feeding, the others are frozen.
+    searching = bank.leader < 0 or bank.observed < 0
     kept, fed = [], False
     for c in bank.candidates:
         k = row.get(c.feature_id)
         is_leader = c.feature_id == bank.leader
         if k is None and not is_leader:
             continue  # no longer tracked: gone for good (ids are never reused)
-        if k is not None and usable[k] and (bank.leader < 0 or is_leader):
+        if k is not None and usable[k] and (searching or is_leader):
             num = c.solution.num_samples
             c = _feed(c, params, criteria, frame_time, p_CP[k], X_frame, forgetting_factor,
                       refine=is_leader)
             fed = fed or c.solution.num_samples > num
-        if bank.leader < 0:  # with a leader, the others are frozen until the next reset
+        if searching and not is_leader:
             if frame_time - c.last_sample > params.max_lost_time:
                 continue  # occluded too long: the slot is freed
-            if frame_time - c.admitted > params.max_unconverged_time and not c.solution.verdict.converged:
+            sol = c.solution
+            too_long = frame_time - c.admitted > params.max_unconverged_time and not sol.verdict.converged
+            misfit = sol.num_samples >= criteria.min_samples and not sol.expected_rms <= params.reject_rms
+            if too_long or misfit:
                 rejected = rejected | {c.feature_id}
                 continue
         kept.append(c)
 
     # Admit new candidates: body features with a point, oldest track first.
     leader, adoptions, round_start = bank.leader, bank.adoptions, bank.round_start
-    if leader < 0:
+    adopted_mse = bank.adopted_mse
+    if searching:
         present = {c.feature_id for c in kept}
-        for k in np.argsort(ids, kind="stable"):
+        # Confirmed body features first, then features in body cells; oldest track first.
+        order = np.lexsort((ids, ~on_body))
+        for k in order:
             if len(kept) >= params.max_candidates:
                 break
             i = int(ids[k])
-            if on_body[k] and usable[k] and i not in present and i not in rejected:
+            if (on_body[k] or in_body_cell[k]) and usable[k] and i not in present and i not in rejected:
                 kept.append(_admit(i, criteria, frame_time, p_CP[k], X_frame))
                 fed = True
                 if math.isnan(round_start):
                     round_start = float(frame_time)
+    if leader < 0:
         # The first to converge leads (the smallest expected error among simultaneous ones).
         converged = [c for c in kept if c.solution.verdict.converged]
         if converged:
             best = min(converged, key=lambda c: c.solution.expected_mse)
             best = _solve(best, criteria, forgetting_factor, refine=True)
-            if best.solution.verdict.converged:
+            if best.solution.verdict.converged and _confirmed(best, kept, params, row, usable):
                 kept = [best if c.feature_id == best.feature_id else c for c in kept]
                 leader = best.feature_id
+                adopted_mse = best.solution.expected_mse
                 adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
-                                                  best.admitted, round_start),)
+                                                  best.admitted, round_start, best.solution.estimate),)
+        elif params.keep_camera and bank.previous_x is not None:
+            # A slipped tool leaves the camera where it was: if the abandoned model's camera
+            # explains a candidate's samples (with its own p_HP), only p_HP is re-identified.
+            options = _consistent(replace(bank, candidates=tuple(kept)), params, row, usable,
+                                  bank.previous_x)
+            if options:
+                mse, leader, p_HP, _ = min(options, key=lambda o: o[0])
+                best = next(c for c in kept if c.feature_id == leader)
+                best = _with_camera(best, bank.previous_x, p_HP, mse)
+                kept = [best if c.feature_id == leader else c for c in kept]
+                adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
+                                                  best.admitted, round_start, best.solution.estimate,
+                                                  "previous camera"),)
     # Before a leader, a frame that fed any identifier counts as a sample (the state machine
     # checks a solution's samples against the count since a reset); after, observations count.
     count = bank.sample_count + (1 if fed and bank.leader < 0 else 0)
     bank = replace(bank, candidates=tuple(kept), leader=leader, rejected=rejected, round_start=round_start,
                    sample_count=count,
                    last_frame=float(frame_time), adoptions=adoptions,
-                   observed=bank.observed if leader == bank.leader else leader)
-    return _observe(bank, params, frame_time, X_frame, ids, p_CP, usable, on_body, row, reference_x)
+                   observed=bank.observed if leader == bank.leader else leader,
+                   observed_last=bank.observed_last if leader == bank.leader else None,
+                   observed_p_HP=bank.observed_p_HP if leader == bank.leader else None,
+                   witness=bank.witness if leader == bank.leader else -1,
+                   adopted_mse=adopted_mse)
+    return _observe(bank, params, frame_time, X_frame, ids, p_CP, usable, on_body | in_body_cell, row,
+                    reference_x, allowable_error)
+
+
+def _confirmed(c: Candidate, kept, params: CandidateParams, row, usable) -> bool:
+    """Whether another candidate's samples agree with ``c``'s camera (with their own ``p_HP``),
+    when ``params.confirm_with_witness`` asks for it: two tracked points of the hand must tell the
+    same camera pose before it is adopted."""
+    if not params.confirm_with_witness:
+        return True
+    probe = CandidateBank(candidates=tuple(kept), leader=c.feature_id, adopted_mse=c.solution.expected_mse)
+    return bool(_consistent(probe, params, row, usable, c.solution.x, exclude=(c.feature_id,)))
+
+
+def _with_camera(c: Candidate, x_previous: np.ndarray, p_HP: np.ndarray, mse: float) -> Candidate:
+    """The candidate with the solution "the previous camera and this p_HP", converged."""
+    R_WC, p_WC = x_previous[0:9].reshape(3, 3, order="F"), x_previous[9:12]
+    estimate = EyeToHandEstimate(R_WC, p_WC.copy(), p_HP, pack_x(R_WC, p_WC, p_HP), mse)
+    verdict = Verdict(True, "converged: the previous camera explains the samples, p_HP re-identified")
+    solution = replace(c.solution, projected=estimate, refined=estimate, expected_mse=mse, verdict=verdict)
+    return replace(c, solution=solution)
 
 
 def _admit(feature_id, criteria, time, p_CP, X_WH) -> Candidate:
@@ -323,31 +434,124 @@ def _feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, r
                    solution=identifier.solve(refine_estimate=refine))
 
 
-def _observe(bank, params, time, X_WH, ids, p_CP, usable, on_body, row, reference_x) -> CandidateBank:
-    """The observed feature's ``s_t`` (Eq. (2)) under the reference estimate, with re-acquisition."""
+def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
+             allowable_error=math.inf) -> CandidateBank:
+    """The observed point's ``s_t`` (Eq. (2)) under the reference estimate, confirmed by a witness;
+    when it is lost, re-acquisition near the prediction or another consistent candidate.
+
+    The witness is a second candidate consistent with the adopted camera (nearest in H to the
+    observed point, so on the same part of the tool when there is one). The reported ``s_t`` is
+    the smaller of the two: a change of the body (the tool slipped, the camera moved) moves both
+    points, a tracking failure (a corner sliding along a silhouette onto the background) only one.
+    When the observed point alone violates ``allowable_error`` for ``primary_failures`` samples
+    while the witness does not, the witness becomes the observed point."""
     if bank.leader < 0:
         return bank
     x = reference_x if x_is_set(reference_x) else bank.find(bank.leader).solution.x
     if not x_is_set(x):
         return bank
-    observed = bank.observed
-    k = row.get(observed)
+    x = np.array(x, dtype=float)
+    if bank.observed_p_HP is not None:
+        x[12:15] = bank.observed_p_HP
+    k = _gated_row(bank.observed, bank.observed_last, row, p_CP, X_WH, params)
     if k is None:
-        # Lost: the body feature nearest to where the estimate puts the tracked point takes over.
-        candidates = np.flatnonzero(usable & on_body)
-        if candidates.size == 0:
-            return bank
-        distance = np.linalg.norm(p_CP[candidates] - predicted_p_CP(x, X_WH), axis=1)
-        best = int(np.argmin(distance))
-        if distance[best] > params.reacquire_radius:
-            return bank
-        k = int(candidates[best])
-        return replace(bank, observed=int(ids[k]))  # observed from the next frame on (no gate yet)
+        return _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x)
     if not usable[k]:
         return bank
-    error = SustainableIdentifier.sample_error(build_A(p_CP[k], X_WH[:3, :3], X_WH[:3, 3]), x)
-    return replace(bank, sample_count=bank.sample_count + 1,
-                   sample_error=error if math.isfinite(error) else math.inf)
+    error = _error(p_CP[k], X_WH, x)
+    bank = replace(bank, observed_last=(p_CP[k].copy(), X_WH))
+    if bank.witness < 0 or bank.witness not in row:
+        bank = _choose_witness(bank, params, row, usable, x)
+    w = _gated_row(bank.witness, bank.witness_last, row, p_CP, X_WH, params) if bank.witness >= 0 else None
+    reported, failures = error, 0
+    if w is not None and usable[w]:
+        x_w = x.copy()
+        x_w[12:15] = bank.witness_p_HP
+        witness_error = _error(p_CP[w], X_WH, x_w)
+        bank = replace(bank, witness_last=(p_CP[w].copy(), X_WH))
+        reported = min(error, witness_error)
+        if error > allowable_error >= witness_error:
+            failures = bank.primary_failures + 1
+    elif w is None and bank.witness >= 0:
+        bank = replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
+    bank = replace(bank, sample_count=bank.sample_count + 1, primary_failures=failures,
+                   sample_error=reported if math.isfinite(reported) else math.inf)
+    if failures >= params.primary_failures:
+        bank = replace(bank, observed=bank.witness, observed_p_HP=bank.witness_p_HP,
+                       observed_last=bank.witness_last, witness=-1, witness_p_HP=None,
+                       witness_last=None, primary_failures=0)
+    return bank
+
+
+def _error(p_CP, X_WH, x) -> float:
+    return SustainableIdentifier.sample_error(build_A(p_CP, X_WH[:3, :3], X_WH[:3, 3]), x)
+
+
+def _gated_row(feature_id, last, row, p_CP, X_WH, params):
+    """The feature's row if tracked and its point did not jump (a tracking failure), else None."""
+    k = row.get(feature_id)
+    if k is not None and last is not None:
+        p_prev, X_prev = last
+        jump = replace(params, gate_margin=params.gate_margin + params.observation_jump)
+        if not within_motion_gate(p_prev, X_prev, p_CP[k], X_WH, jump):
+            return None
+    return k
+
+
+def _consistent(bank, params, row, usable, x, exclude=()):
+    """Candidates tracked now whose samples the adopted camera explains (each with its own best
+    ``p_HP``, least squares from its statistic): ``[(mse, feature_id, p_HP, row)]``."""
+    R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
+    limit = params.observe_consistency**2 * bank.adopted_mse
+    out = []
+    for c in bank.candidates:
+        k = row.get(c.feature_id)
+        if k is None or not usable[k] or c.feature_id in exclude:
+            continue
+        if c.solution.num_samples < params.observe_min_samples:
+            continue
+        p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
+        mse = mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP))
+        if mse <= limit:
+            out.append((mse, c.feature_id, p_HP, k))
+    return out
+
+
+def _choose_witness(bank, params, row, usable, x) -> CandidateBank:
+    options = _consistent(bank, params, row, usable, x, exclude=(bank.observed, bank.leader))
+    if not options:
+        return replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
+    _, feature_id, p_HP, _ = min(options, key=lambda o: float(np.linalg.norm(o[2] - x[12:15])))
+    return replace(bank, witness=feature_id, witness_p_HP=p_HP, witness_last=None)
+
+
+def _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x) -> CandidateBank:
+    """A new observed point: a body feature where ``x`` puts the observed point (a new track of
+    the same point), else the most consistent candidate (with its own ``p_HP``), else none."""
+    near = np.flatnonzero(usable & body)
+    if near.size:
+        distance = np.linalg.norm(p_CP[near] - predicted_p_CP(x, X_WH), axis=1)
+        best = int(np.argmin(distance))
+        if distance[best] <= params.reacquire_radius:
+            k = int(near[best])
+            bank = replace(bank, observed=int(ids[k]), observed_last=(p_CP[k].copy(), X_WH))
+            if bank.observed == bank.witness:
+                bank = replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
+            return bank
+    options = _consistent(bank, params, row, usable, x, exclude=(bank.observed,))
+    if not options:
+        return replace(bank, observed=-1, observed_last=None)
+    _, feature_id, p_HP, k = min(options, key=lambda o: o[0])
+    witness = (dict(witness=-1, witness_p_HP=None, witness_last=None) if feature_id == bank.witness else {})
+    return replace(bank, observed=feature_id, observed_p_HP=p_HP, observed_last=(p_CP[k].copy(), X_WH),
+                   **witness)
+
+
+def mean_squared_error_of(statistic: np.ndarray, x: np.ndarray) -> float:
+    """``x^T C x`` (Eq. (3)): the mean of ``s_t`` over the samples behind ``statistic``, m^2."""
+    identifier = EyeToHandIdentifier()
+    identifier.set_state(statistic)
+    return identifier.core.mean_squared_error(x)
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ class CandidateIdentifiers(LeafSystem):
         - X_WH
         - reset (optional)
         - reference_x (optional)
+        - allowable_error (optional)
         output_ports:
         - eigenvalues
         - x
@@ -46,7 +47,9 @@ class CandidateIdentifiers(LeafSystem):
     the pose at each frame's capture time is taken from a short history), ``reset`` (1,
     edge-triggered: a new value drops every candidate; connect a ``CoordinationStateMachine``'s
     ``reset``), ``reference_x`` (16: the adopted estimate, for ``observation``; connect the state
-    machine's ``adopted_x``).
+    machine's ``adopted_x``), ``allowable_error`` (1, m^2: the state machine's sigma, so that a
+    tracking failure of the observed point, which its witness does not share, is told from a change
+    of the body; unconnected: never).
 
     Outputs, the same as a ``SustainableIdentifierSystem`` with ``EyeToHandFormulation`` so that a
     ``CoordinationStateMachine`` plugs in: the solution-derived ports are those of the *shown*
@@ -74,6 +77,7 @@ class CandidateIdentifiers(LeafSystem):
         self._X_WH = self.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform()))
         self._reset = self.DeclareVectorInputPort("reset", 1)
         self._reference = self.DeclareVectorInputPort("reference_x", N_UNKNOWNS)
+        self._sigma = self.DeclareVectorInputPort("allowable_error", 1)
         self._empty = candidates.empty_solution(self._formulation.criteria)
         self._bank = self.DeclareAbstractState(AbstractValue.Make(CandidateBank()))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
@@ -106,14 +110,18 @@ class CandidateIdentifiers(LeafSystem):
     def _update(self, context, state) -> None:
         features = self._features.Eval(context)
         flags = self._flags.Eval(context)
-        on_body = np.zeros(len(features), bool)
+        on_body = in_body_cell = np.zeros(len(features), bool)
         if len(flags.ids) == len(features) and np.array_equal(flags.ids, features.ids):
             on_body = np.asarray(flags.on_body, bool)
+            in_body_cell = np.asarray(flags.in_body_cell, bool)
         reset = float(self._reset.Eval(context)[0]) if self._reset.HasValue(context) else 0.0
         reference = self._reference.Eval(context) if self._reference.HasValue(context) else None
+        sigma = float(self._sigma.Eval(context)[0]) if self._sigma.HasValue(context) else np.inf
+        if not sigma > 0:
+            sigma = np.inf  # no adopted model yet
         new = candidates.step(
             self.bank(context), self._params, self._formulation.criteria, context.get_time(), reset,
             self._X_WH.Eval(context).GetAsMatrix4(), features.time, features.ids, features.p_CP,
-            features.valid, on_body, reference, self._formulation.forgetting_factor,
+            features.valid, on_body, reference, self._formulation.forgetting_factor, in_body_cell, sigma,
         )  # fmt: skip
         state.get_mutable_abstract_state(self._bank).set_value(new)
