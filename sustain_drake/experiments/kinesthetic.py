@@ -28,7 +28,10 @@ from sustain_drake.identification import coordination
 from sustain_drake.station.build import HAND_BODY, SENSOR_JOINT
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.quasi_static_gate import QuasiStaticGate
-from sustain_drake.systems.sustainable_identifier_system import PayloadFormulation, SustainableIdentifierSystem
+from sustain_drake.systems.sustainable_identifier_system import (
+    PayloadFormulation,
+    SustainableIdentifierSystem,
+)
 from sustain_drake.systems.touch_estimator import TouchEstimator
 
 
@@ -171,7 +174,8 @@ def finish(handle: KinestheticHandle, diagram, context, out_dir) -> dict:
             "p_KCm_m": adopted.p_KCm.tolist(), "true_p_KCm_m": p_true.tolist(),
             "com_error_mm": 1000.0 * float(np.linalg.norm(adopted.p_KCm - p_true)),
             "samples_at_convergence": adopted.num_samples,
-            "allowable_error": float(handle.state_machine.GetOutputPort("allowable_error").Eval(sm_context)[0]),
+            "allowable_error": float(
+                handle.state_machine.GetOutputPort("allowable_error").Eval(sm_context)[0]),
         })  # fmt: skip
     metrics["final_estimate"] = {
         "converged": final.verdict.converged, "reason": final.verdict.reason, "samples": final.num_samples,

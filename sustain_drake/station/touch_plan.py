@@ -12,7 +12,7 @@ from sustain_drake.systems.touch_motion import TouchPosture
 
 # A posture is accepted when the point is within 0.5 mm and the direction within ~0.1 deg.
 _TOLERANCE = 5e-4
-_SEEDS = 60
+_SEEDS = 12
 
 
 class _Kinematics:

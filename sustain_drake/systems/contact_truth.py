@@ -11,10 +11,10 @@ from pydrake.systems.framework import LeafSystem
 _MIN_FORCE = 1e-6
 
 
-def centre_of_pressure(points_W, forces_W, normals_W, weights, moments_W=None) -> tuple[np.ndarray, np.ndarray]:
+def centre_of_pressure(points_W, forces_W, normals_W, weights, moments_W=None):
     """The point where the resultant of contact forces (``forces_W[i]`` applied at
     ``points_W[i]``, with couples ``moments_W[i]``, default none) meets the contact plane, and
-    the resultant force.
+    the resultant force, ``(p_WQ, f_W)``.
 
     The contact plane goes through the ``weights``-weighted centroid of the points with the
     weighted mean normal; the point returned is where the resultant's central axis crosses it,

@@ -108,6 +108,11 @@ class TouchMotion(LeafSystem):
             prerequisites_of_calc={self.xd_ticket()},
         )  # fmt: skip
 
+    def postures(self) -> list[TouchPosture]:
+        """The touch postures, in order."""
+        return [TouchPosture(tuple(a), tuple(p), tuple(h))
+                for a, p, h in zip(self._above, self._press, self._high, strict=True)]
+
     def _x(self, context) -> np.ndarray:
         return context.get_discrete_state(self._state).get_value()
 
