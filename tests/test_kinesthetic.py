@@ -293,3 +293,46 @@ def test_inertia_touch_end_to_end(tmp_path):
     assert touch["median_mm"] < 5.0 and touch["false_touch_samples"] == 0
     assert (tmp_path / "kinesthetic_eigenvalues.png").stat().st_size > 10_000
     assert (tmp_path / "kinesthetic_touch_points.png").stat().st_size > 10_000
+
+
+def test_touch_motion_hands_back_to_the_babbling_when_start_falls():
+    above, press, high = np.zeros(5), np.full(5, 0.1), np.full(5, -0.1)
+    builder = DiagramBuilder()
+    motion = builder.AddSystem(TouchMotion([TouchPosture(tuple(above), tuple(press), tuple(high))],
+                                           descend_duration=4.0, keep_touching=1.5, press_extra=0.1,
+                                           max_speed=1.0, start_delay=0.0))  # fmt: skip
+    babble = builder.AddSystem(ConstantVectorSource(np.concatenate([np.full(5, 0.3), np.zeros(5)])))
+    builder.Connect(babble.get_output_port(), motion.GetInputPort("babble_state"))
+    simulator = Simulator(builder.Build())
+    context = motion.GetMyContextFromRoot(simulator.get_mutable_context())
+    motion.GetInputPort("start").FixValue(context, [1.0])
+    simulator.AdvanceTo(1.5)  # moving to the first posture, away from the babbling's 0.3 rad
+    assert PHASE_NAMES[int(motion.GetOutputPort("phase").Eval(context)[0])] in ("MOVE", "APPROACH")
+    motion.GetInputPort("start").FixValue(context, [0.0])  # identify again: back to babbling
+    previous = motion.GetOutputPort("desired_state").Eval(context).copy()
+    seen = set()
+    while simulator.get_context().get_time() < 6.0:
+        simulator.AdvanceTo(simulator.get_context().get_time() + 0.01)
+        seen.add(PHASE_NAMES[int(motion.GetOutputPort("phase").Eval(context)[0])])
+        now = motion.GetOutputPort("desired_state").Eval(context).copy()
+        assert np.max(np.abs(now[:5] - previous[:5])) < 0.02  # no jump in the desired posture
+        previous = now
+    assert {"RELEASE", "HANDBACK", "PASS"} <= seen
+    np.testing.assert_allclose(previous, np.concatenate([np.full(5, 0.3), np.zeros(5)]))
+
+
+@pytest.mark.parametrize(("text", "words"), [
+    ("kinesthetic: {enabled: true}\n", "tool.model: box"),
+    ("tool: {model: box}\nkinesthetic: {enabled: true, period: 0}\n", "kinesthetic"),
+    ("tool: {model: box}\ntouch_motion: {enabled: true}\n", "targets"),
+    ("tool: {model: box}\ntouch_motion: {enabled: true, targets: [{p_WQ: [0.3]}]}\n", "p_WQ"),
+    ("tool: {model: box}\ntouch_motion: {enabled: true, targets: [{p_WQ: [3.0, 0.0]}]}\n", "reach"),
+])
+def test_kinesthetic_scenario_errors_are_one_line(tmp_path, text, words):
+    from sustain_drake.station import ScenarioError
+
+    path = tmp_path / "bad.yaml"
+    path.write_text("camera: {rgb: false, depth: false, label: false}\n" + text)
+    with pytest.raises(ScenarioError) as error:
+        build_station(load_scenario(path))
+    assert words in str(error.value) and "\n" not in str(error.value)

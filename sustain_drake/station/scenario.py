@@ -333,6 +333,18 @@ def validate_scenario(s: Scenario) -> None:
             _check(s.tool.model != "none", f"{name}: there is no tool to slip")
         else:
             _finite([e.pan, e.tilt], name)
+    k = s.kinesthetic
+    if k.enabled:
+        _check(s.tool.model == "box", "kinesthetic: needs tool.model: box (the tool with a collision "
+               "shape to locate touches on)")
+        q = k.quasi_static
+        _finite([k.period, k.min_touch_force, k.eval_min_force, q.max_joint_speed,
+                 q.max_joint_acceleration, q.window, q.touch_holdoff, q.max_touch_duration],
+                "kinesthetic values")
+        _check(k.period > 0 and k.min_touch_force >= 0 and k.eval_min_force >= 0
+               and q.max_joint_speed > 0 and q.max_joint_acceleration > 0 and q.window >= 0
+               and q.touch_holdoff >= 0 and q.max_touch_duration > 0,
+               "kinesthetic: period and the quasi-static limits must be > 0, forces and times >= 0")
     tm = s.touch_motion
     if tm.enabled:
         _check(s.tool.model != "none", "touch_motion: there is no tool to touch with")
