@@ -157,6 +157,7 @@ class EstimateVisualizer(LeafSystem):
         meshcat.SetObject(f"{prefix}/estimated_point", Sphere(0.012), Rgba(1.0, 0.5, 0.0, 0.9))
         meshcat.SetObject(f"{prefix}/true_point", Sphere(0.006), Rgba(1.0, 1.0, 1.0, 1.0))
         self.DeclarePeriodicPublishEvent(period, 0.0, self._publish)
+        self.DeclareForcedPublishEvent(self._publish)
 
     def _publish(self, context) -> None:
         t = context.get_time()

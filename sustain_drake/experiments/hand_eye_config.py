@@ -27,6 +27,7 @@ class CandidatesConfig:
     primary_failures: int = 10
     keep_camera: bool = True
     confirm_with_witness: bool = True
+    min_rotation_spread: float = 0.15
 
     def params(self) -> CandidateParams:
         return CandidateParams(**dataclasses.asdict(self))

@@ -87,6 +87,9 @@ class CandidateParams:
         confirm_with_witness: a converged candidate leads only if another candidate (with at least
             ``observe_min_samples`` samples) is explained by its camera within
             ``observe_consistency``: a wrong camera that happens to fit one track is not adopted.
+        min_rotation_spread: rad; a candidate is only taken as consistent with a camera (witness,
+            hand-over, kept camera) if the hand turned at least this much over its samples
+            (``rotation_spread``): while the hand only translates, any point fits.
         reacquire_radius: m, how near the adopted estimate's prediction a body feature must be to
             take over the observation of a lost observed feature.
         pose_tolerance: s, how far the nearest hand pose may be from a frame's capture time.
@@ -107,6 +110,7 @@ class CandidateParams:
     primary_failures: int = 10
     keep_camera: bool = True
     confirm_with_witness: bool = True
+    min_rotation_spread: float = 0.15
 
     def __post_init__(self):
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1):
@@ -114,7 +118,8 @@ class CandidateParams:
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
         for name in ("max_hand_radius", "gate_margin", "max_lost_time", "max_unconverged_time",
-                     "reacquire_radius", "pose_tolerance", "reject_rms", "observation_jump"):
+                     "reacquire_radius", "pose_tolerance", "reject_rms", "observation_jump",
+                     "min_rotation_spread"):
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a positive number, got {value}")
@@ -510,6 +515,8 @@ def _consistent(bank, params, row, usable, x, exclude=()):
             continue
         if c.solution.num_samples < params.observe_min_samples:
             continue
+        if rotation_spread(c.statistic) < params.min_rotation_spread:
+            continue  # the hand hardly turned: any point, even on another link, would fit
         p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
         mse = mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP))
         if mse <= limit:
@@ -545,6 +552,19 @@ def _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x) -> Candidate
     witness = (dict(witness=-1, witness_p_HP=None, witness_last=None) if feature_id == bank.witness else {})
     return replace(bank, observed=feature_id, observed_p_HP=p_HP, observed_last=(p_CP[k].copy(), X_WH),
                    **witness)
+
+
+def rotation_spread(statistic: np.ndarray) -> float:
+    """How much the hand turned over a candidate's samples, rad (about the RMS angle from the mean
+    orientation): ``sqrt((3 - ||mean R_WH||_F^2) / 2)``, from the statistic alone
+    (``S[9:12, 12:15] = -sum R_WH``). Zero when the hand only translated."""
+    n = EyeToHandIdentifier().core.num_unknowns
+    S = np.asarray(statistic, dtype=float)[: n * n].reshape(n, n)
+    count = S[9, 9]
+    if count <= 0:
+        return 0.0
+    M = -S[9:12, 12:15] / count
+    return math.sqrt(max(3.0 - float(np.sum(M * M)), 0.0) / 2.0)
 
 
 def mean_squared_error_of(statistic: np.ndarray, x: np.ndarray) -> float:
