@@ -244,3 +244,49 @@ def test_a_trial_is_a_new_move_from_rest_not_a_late_joint_of_the_same_move():
                  signal(n, (31, 50), (91, 100))[:, None],
                  CoincidenceParams(posture_tolerance=0.4))
     assert back[-1].trial_count == 1 and back[-1].hits[0, 0] == 1
+
+
+def test_known_body_cells_and_the_request_interval_hold_requests_back():
+    """A coincidence in a cell known to hold the body (a confirmed body feature) raises no
+    request; after a request ends, a new one waits request_interval."""
+    n = 60
+    act, vis = signal(n, (30, 60)), signal(n, (32, 60))
+
+    def run_steps(params, known):
+        state = CoincidenceState(1, 1)
+        q = 0.0
+        for k in range(n):
+            q += 0.5 * DT * act[k]
+            state = step(state, (k + 1) * DT, np.array([q]), 50.0 * np.array([vis[k]]),
+                         params, known)
+        return state
+
+    p = CoincidenceParams()
+    assert run_steps(p, np.array([False])).request_count == 1
+    assert run_steps(p, np.array([True])).request_count == 0
+    assert run_steps(p, None).request_count == 1
+    waiting = CoincidenceState(1, 1)
+    waiting.request_end = np.float64(0.9)      # a request ended just before the coincidence
+    q, state = 0.0, waiting
+    for k in range(n):
+        q += 0.5 * DT * act[k]
+        state = step(state, (k + 1) * DT, np.array([q]), 50.0 * np.array([vis[k]]),
+                     CoincidenceParams(request_interval=2.0))
+    assert state.request_count == 0 and state.eps[0, 0] == 1   # counted, but no request
+    with pytest.raises(ValueError, match="known_body"):
+        step(CoincidenceState(1, 2), 0.1, np.zeros(1), np.zeros(2), p, np.ones(3, bool))
+
+
+def test_chance_rate_counts_onsets_outside_actuator_windows_while_the_arm_moves():
+    """A cell with onsets every 0.5 s while the arm moves on and on (never still, so λ_j keeps
+    its prior) gets a chance rate near 2/s from the onsets outside actuator windows."""
+    n = 600
+    act = np.zeros(n, bool)
+    act[5:] = True                             # one onset at the start, then moving all along
+    vis = np.zeros(n, bool)
+    for start in range(40, n, 15):
+        vis[start:start + 5] = True
+    s, p = drive(act[:, None], vis[:, None])[-1], CoincidenceParams()
+    assert s.spontaneous_rate(p)[0] == pytest.approx(0.5, rel=0.05)  # ~ the prior: never still
+    assert s.chance_rate(p)[0] == pytest.approx(3.0, rel=0.25)   # onsets / quiet-cell time
+    assert s.chance_probability(p)[0] > 0.5

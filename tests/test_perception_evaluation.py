@@ -112,3 +112,49 @@ def test_episode_evaluator_streams_frames_into_the_metrics():
         ev.update(3.0, lab, np.zeros(3), sdot)
     with pytest.raises(ValueError, match="no frames"):
         EpisodeEvaluator(GRID, (ARM,)).metrics()
+
+
+def test_episode_evaluator_round_trips_its_vector_and_scores_parts():
+    from sustain_drake.perception.evaluation import EpisodeEvaluator
+
+    ev = EpisodeEvaluator(GRID, (ARM, TOOL), (PERSON,), parts=("cells", "features"))
+    lab = labels()
+    sdot = np.zeros(8)
+    sdot[[0, 1]] = 3.0
+    cells, features = np.zeros(8), np.zeros(8)
+    cells[0] = 1
+    features[[1, 7]] = 1
+    ev.update(0.2, lab, np.maximum(cells, features), sdot,
+              parts={"cells": cells, "features": features})
+    copy = EpisodeEvaluator(GRID, (ARM, TOOL), (PERSON,), parts=("cells", "features"))
+    copy.set_vector(ev.to_vector())
+    assert np.array_equal(copy.to_vector(), ev.to_vector())
+    m = copy.metrics()
+    assert m == ev.metrics()
+    assert m["parts"]["cells"]["precision"] == 1.0 and m["parts"]["cells"]["recall"] == 0.5
+    assert m["parts"]["features"]["distractor_cells_marked"] == 1
+    assert m["distractor_cells_marked"] == 1 and m["recall"] == 1.0
+    assert m["latency_median_s"] == 0.0 and m["latency_cells"] == 2
+    with pytest.raises(ValueError, match="mask parts"):
+        ev.update(0.3, lab, cells, sdot)
+    with pytest.raises(ValueError, match="entries"):
+        copy.set_vector(np.zeros(3))
+
+
+def test_mask_versus_truth_picture_colours_hits_errors_and_misses():
+    from sustain_drake.perception.evaluation import draw_mask_vs_truth, png_bytes
+
+    image = np.full((40, 80, 3), 128, np.uint8)
+    truth = np.array([BODY, BODY, BACKGROUND, BACKGROUND, IGNORED, BACKGROUND, BACKGROUND,
+                      BACKGROUND])
+    marked = np.array([1, 0, 1, 0, 0, 0, 0, 0], bool)
+    distractor = np.zeros(8, bool)
+    distractor[7] = True
+    rgb = draw_mask_vs_truth(image, GRID, marked, truth, distractor)
+    assert rgb[10, 10, 1] > rgb[10, 10, 0]                        # true positive: green
+    assert rgb[10, 50, 0] > rgb[10, 50, 1]                        # false positive: red
+    assert tuple(rgb[0, 25]) == (255, 255, 0)                     # missed body: yellow outline
+    assert tuple(rgb[20, 65]) == (0, 0, 255)                      # distractor: blue outline
+    assert tuple(rgb[30, 30]) == (128, 128, 128)
+    back = cv2.imdecode(np.frombuffer(png_bytes(rgb), np.uint8), cv2.IMREAD_COLOR)
+    assert back.shape == (40, 80, 3) and back[10, 50, 2] > back[10, 50, 1]   # BGR on disk

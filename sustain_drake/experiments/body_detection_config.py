@@ -28,6 +28,7 @@ class BodyDetectionConfig:
     # Tracker (Shi-Tomasi + pyramidal Lucas-Kanade).
     max_corners: int = _TRACKER.max_corners
     min_distance_px: float = _TRACKER.min_distance_px
+    quality_level: float = _TRACKER.quality_level
     # Eq. (27): onset windows and what counts as motion.
     tau_a: float = _RULE.tau_a
     tau_s: float = _RULE.tau_s
@@ -43,9 +44,12 @@ class BodyDetectionConfig:
     confirm: bool = True  # wire the detector's confirm request to the station's motion_confirm
     posture_tolerance: float = _RULE.posture_tolerance
     confirm_timeout: float = _RULE.confirm_timeout
+    request_interval: float = _RULE.request_interval
     single_joint_confirm: bool = _RULE.single_joint_confirm
     # Body features: confirming-trial hits that make a tracked feature body.
     feature_hits: int = FeatureParams().hits
+    # Cells holding a confirmed body feature raise no confirming request.
+    skip_feature_cells: bool = FeatureParams().skip_known_cells
     # Evaluation (label image, for evaluation only): a cell is true body where the robot's
     # moving bodies cover at least body_cover of it. The scored mask is the detector's body
     # cells, with the cells holding a confirmed body feature when score_features.
@@ -61,10 +65,12 @@ class BodyDetectionConfig:
             sdot_threshold=self.sdot_threshold, alpha=self.alpha, p_response=self.p_response,
             body_onset_rate=self.body_onset_rate, memory=self.memory,
             response_window=self.response_window, posture_tolerance=self.posture_tolerance,
-            confirm_timeout=self.confirm_timeout, single_joint_confirm=self.single_joint_confirm)
+            confirm_timeout=self.confirm_timeout, request_interval=self.request_interval,
+            single_joint_confirm=self.single_joint_confirm)
 
     def feature_params(self) -> FeatureParams:
-        return FeatureParams(hits=self.feature_hits)
+        return FeatureParams(hits=self.feature_hits, skip_known_cells=self.skip_feature_cells)
 
     def tracker_params(self) -> TrackerParams:
-        return TrackerParams(max_corners=self.max_corners, min_distance_px=self.min_distance_px)
+        return TrackerParams(max_corners=self.max_corners, min_distance_px=self.min_distance_px,
+                             quality_level=self.quality_level)

@@ -41,8 +41,10 @@ moves by itself" (it falls in the window by chance with probability ``p0_j``). I
    no request is pending, the detector requests one: go back to the posture ``q*`` at the onset of
    the actuator motion, hold still (``hold_time``, varied per request so trials never phase-lock
    with a periodic distractor such as a walking person), and move again (every joint, or with
-   ``single_joint_confirm`` only the most proximal candidate actuator ``request_joint``). The coincidence that
-   raised the request is *not* evidence: it was selected because it coincided.
+   ``single_joint_confirm`` only the most proximal candidate actuator ``request_joint``). The
+   coincidence that raised the request is *not* evidence: it was selected because it
+   coincided. A new request waits ``request_interval`` after the last one ended, so the arm
+   babbles (and shows more of the image) between confirmations.
 3. *Trial* (``C_j``). The first actuator onset within ``posture_tolerance`` of ``q*`` after the
    request, with the whole arm at rest for ``quiet_a`` before it (a new move, not a late
    onset of another joint in the move that raised the request), starts a trial. A candidate
@@ -106,6 +108,9 @@ class CoincidenceParams:
     confirm_timeout: float = 5.0       # s: an unanswered confirming request expires
     single_joint_confirm: bool = False  # confirm by moving only the most proximal candidate
     #                                    actuator (lowest index) instead of all joints
+    request_interval: float = 0.0      # s: a new coincidence raises a request only this long
+    #                                    after the last request ended (follow-ups at once), so
+    #                                    the babbling explores between confirmations
     response_window: float | None = None  # s: a trial hit's visual onset must follow the
     #                                    actuator onset within this; None: τ_s. A window as
     #                                    short as the real sensor latency makes p0_j smaller.
@@ -118,7 +123,8 @@ class CoincidenceParams:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be finite and positive, got {value}")
-        for name in ("adot_threshold", "sdot_threshold", "quiet_a", "quiet_s", "hold_spread"):
+        for name in ("adot_threshold", "sdot_threshold", "quiet_a", "quiet_s", "hold_spread",
+                     "request_interval"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
@@ -159,6 +165,7 @@ _FIELDS = (
     ("trial_t0", lambda na, nc: ()),
     ("trial_count", lambda na, nc: ()),       # trials started so far
     ("trial_until", lambda na, nc: ()),       # end of the latest trial's response window
+    ("request_end", lambda na, nc: ()),       # when the latest request was cleared
     ("a_prev", lambda na, nc: (na,)),         # previous actuator values a_i
     ("last_motion_a", lambda na, nc: (na,)),  # last time actuator i moved
     ("t_onset_a", lambda na, nc: (na,)),      # last onset time of actuator i
@@ -200,7 +207,8 @@ class CoincidenceState:
         for name, shape in _FIELDS:
             setattr(self, name, np.zeros(shape(self.n_a, self.n_c)))
         for name in ("t_prev", "last_motion_a", "t_onset_a", "last_motion_s", "t_onset_s",
-                     "counted_ta", "counted_ts", "request_time", "trial_t0", "trial_until"):
+                     "counted_ta", "counted_ts", "request_time", "trial_t0", "trial_until",
+                     "request_end"):
             getattr(self, name)[...] = NEVER
 
     @staticmethod
@@ -402,7 +410,7 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             s.trial_moved[:] = 0
             s.trial_hit[:] = 0
         elif t - s.request_time > params.confirm_timeout:
-            _clear_request(s)
+            _clear_request(s, t)
             return
 
     if s.trial_active:
@@ -427,12 +435,12 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             # same posture (a fast sequence of unselected trials).
             follow = (s.trial_hit > 0) & ~(s.body(params) | known)[None, :]
             q = s.q_request.copy()
-            _clear_request(s)
+            _clear_request(s, t)
             if follow.any():
                 _raise_request(s, t, follow, q, params)
         return
 
-    if not s.request_active:
+    if not s.request_active and t - s.request_end >= params.request_interval:
         trigger = new & ~(s.body(params) | known)[None, :]
         if trigger.any():
             acts = np.flatnonzero(trigger.any(axis=1))
@@ -456,7 +464,8 @@ def _raise_request(s: CoincidenceState, t: float, pairs: np.ndarray, q: np.ndarr
     s.candidates = pairs.any(axis=0).astype(float)
 
 
-def _clear_request(s: CoincidenceState):
+def _clear_request(s: CoincidenceState, t: float):
+    s.request_end = np.float64(t)
     s.request_active = np.float64(0)
     s.trial_active = np.float64(0)
     s.candidates[:] = 0
