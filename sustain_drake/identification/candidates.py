@@ -357,7 +357,8 @@ def step(
         if converged:
             best = min(converged, key=lambda c: c.solution.expected_mse)
             best = _solve(best, criteria, forgetting_factor, refine=True)
-            if best.solution.verdict.converged and _confirmed(best, kept, params, row, usable):
+            confirmed = _confirmed(best, kept, params, row, usable, (p_CP, X_frame))
+            if best.solution.verdict.converged and confirmed:
                 kept = [best if c.feature_id == best.feature_id else c for c in kept]
                 leader = best.feature_id
                 adopted_mse = best.solution.expected_mse
@@ -367,7 +368,7 @@ def step(
             # A slipped tool leaves the camera where it was: if the abandoned model's camera
             # explains a candidate's samples (with its own p_HP), only p_HP is re-identified.
             options = _consistent(replace(bank, candidates=tuple(kept)), params, row, usable,
-                                  bank.previous_x)
+                                  bank.previous_x, (p_CP, X_frame))
             if options:
                 mse, leader, p_HP, _ = min(options, key=lambda o: o[0])
                 best = next(c for c in kept if c.feature_id == leader)
@@ -391,14 +392,14 @@ def step(
                     reference_x, allowable_error)
 
 
-def _confirmed(c: Candidate, kept, params: CandidateParams, row, usable) -> bool:
+def _confirmed(c: Candidate, kept, params: CandidateParams, row, usable, frame) -> bool:
     """Whether another candidate's samples agree with ``c``'s camera (with their own ``p_HP``),
     when ``params.confirm_with_witness`` asks for it: two tracked points of the hand must tell the
     same camera pose before it is adopted."""
     if not params.confirm_with_witness:
         return True
     probe = CandidateBank(candidates=tuple(kept), leader=c.feature_id, adopted_mse=c.solution.expected_mse)
-    return bool(_consistent(probe, params, row, usable, c.solution.x, exclude=(c.feature_id,)))
+    return bool(_consistent(probe, params, row, usable, c.solution.x, frame, exclude=(c.feature_id,)))
 
 
 def _with_camera(c: Candidate, x_previous: np.ndarray, p_HP: np.ndarray, mse: float) -> Candidate:
@@ -466,7 +467,7 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     error = _error(p_CP[k], X_WH, x)
     bank = replace(bank, observed_last=(p_CP[k].copy(), X_WH))
     if bank.witness < 0 or bank.witness not in row:
-        bank = _choose_witness(bank, params, row, usable, x)
+        bank = _choose_witness(bank, params, row, usable, x, (p_CP, X_WH))
     w = _gated_row(bank.witness, bank.witness_last, row, p_CP, X_WH, params) if bank.witness >= 0 else None
     reported, failures = error, 0
     if w is not None and usable[w]:
@@ -503,9 +504,12 @@ def _gated_row(feature_id, last, row, p_CP, X_WH, params):
     return k
 
 
-def _consistent(bank, params, row, usable, x, exclude=()):
+def _consistent(bank, params, row, usable, x, frame, exclude=()):
     """Candidates tracked now whose samples the adopted camera explains (each with its own best
-    ``p_HP``, least squares from its statistic): ``[(mse, feature_id, p_HP, row)]``."""
+    ``p_HP``, least squares from its statistic), and whose point in this ``frame`` (``(p_CP,
+    X_WH)``) too (a frozen candidate's track may have slid onto the background since):
+    ``[(mse, feature_id, p_HP, row)]``."""
+    p_now, X_now = frame
     R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
     limit = params.observe_consistency**2 * bank.adopted_mse
     out = []
@@ -519,13 +523,18 @@ def _consistent(bank, params, row, usable, x, exclude=()):
             continue  # the hand hardly turned: any point, even on another link, would fit
         p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
         mse = mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP))
-        if mse <= limit:
+        if mse <= limit and _error(p_now[k], X_now, pack_x(R_WC, p_WC, p_HP)) <= _NOW_FACTOR * limit:
             out.append((mse, c.feature_id, p_HP, k))
     return out
 
 
-def _choose_witness(bank, params, row, usable, x) -> CandidateBank:
-    options = _consistent(bank, params, row, usable, x, exclude=(bank.observed, bank.leader))
+# A single sample's squared error may exceed the mean squared limit by this much (its chi-square
+# tail with three degrees of freedom: P(s > 10 mse) < 1e-3 for Gaussian noise).
+_NOW_FACTOR = 10.0
+
+
+def _choose_witness(bank, params, row, usable, x, frame) -> CandidateBank:
+    options = _consistent(bank, params, row, usable, x, frame, exclude=(bank.observed, bank.leader))
     if not options:
         return replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
     _, feature_id, p_HP, _ = min(options, key=lambda o: float(np.linalg.norm(o[2] - x[12:15])))
@@ -545,7 +554,7 @@ def _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x) -> Candidate
             if bank.observed == bank.witness:
                 bank = replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
             return bank
-    options = _consistent(bank, params, row, usable, x, exclude=(bank.observed,))
+    options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=(bank.observed,))
     if not options:
         return replace(bank, observed=-1, observed_last=None)
     _, feature_id, p_HP, k = min(options, key=lambda o: o[0])
