@@ -77,6 +77,9 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
         5, config.period, qs.max_joint_speed, qs.max_joint_acceleration, qs.window, qs.touch_holdoff,
         qs.max_touch_duration))  # fmt: skip
     gate.set_name("quasi_static_gate")
+    plant = station.GetSubsystemByName("plant")
+    if not plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame().IsExactlyIdentity():
+        raise ValueError("kinesthetic: the sensor frame K must be the hand frame H (X_WH is used as X_WK)")
     shape, X_KG = held_shape(station)
     estimator = builder.AddSystem(TouchEstimator(shape, X_KG, min_force=config.min_touch_force))
     estimator.set_name("touch_estimator")
