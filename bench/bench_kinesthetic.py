@@ -6,7 +6,7 @@ seed and prints one row per seed plus the worst case: when the payload was ident
 and centre-of-mass errors of the adopted estimate, and the touch-point errors (median / max, mm,
 contact forces >= 5 N), touches felt, false touch samples.
 
-    .venv/bin/python bench/bench_kinesthetic.py [--seeds 11 1 2 3 4] [--duration 70] [--gap G]
+    .venv/bin/python bench/bench_kinesthetic.py [--seeds 11 1 2 3 4] [--duration 80] [--gap G]
 
 ``--gap`` overrides the convergence gap ``kinesthetic.coordination.min_gap_ratio`` (with a short
 ``--duration``, e.g. 12 s, only the identification is compared).
@@ -45,7 +45,7 @@ def run(seed: int, duration: float, gap: float | None = None) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[11, 1, 2, 3, 4])
-    parser.add_argument("--duration", type=float, default=70.0)
+    parser.add_argument("--duration", type=float, default=80.0)
     parser.add_argument("--gap", type=float, help="override the payload's min_gap_ratio")
     args = parser.parse_args()
     print("| seed | identified (s) | mass error (%) | CoM error (mm) | touch median / max (mm) "

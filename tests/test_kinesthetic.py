@@ -25,7 +25,7 @@ from sustain_drake.station.scenario import Scenario, TouchTarget
 from sustain_drake.systems.contact_truth import centre_of_pressure
 from sustain_drake.systems.quasi_static_gate import QuasiStaticGate
 from sustain_drake.systems.touch_estimator import TouchEstimator
-from sustain_drake.systems.touch_motion import KEEP, LIFT, PHASE_NAMES, PRESS, TouchMotion, TouchPosture
+from sustain_drake.systems.touch_motion import KEEP, LIFT, PHASE_NAMES, PRESS, REST, TouchMotion, TouchPosture
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "diagrams" / "inertia_touch.yaml"
@@ -246,7 +246,8 @@ def test_touch_motion_keeps_touching_once_felt():
     builder = DiagramBuilder()
     motion = builder.AddSystem(TouchMotion([TouchPosture(tuple(above), tuple(press), tuple(high))],
                                            descend_duration=4.0, keep_touching=1.5, press_extra=0.1,
-                                           max_speed=1.0, start_delay=0.5, repeat=False))  # fmt: skip
+                                           max_speed=1.0, start_delay=0.5, repeat=False,
+                                           rest=0.3))  # fmt: skip
     babble = builder.AddSystem(ConstantVectorSource(np.zeros(10)))
     start = builder.AddSystem(ConstantVectorSource([1.0]))
     builder.Connect(babble.get_output_port(), motion.GetInputPort("babble_state"))
@@ -266,7 +267,8 @@ def test_touch_motion_keeps_touching_once_felt():
     q = q_log.FindLog(context).data()[0]
     phases = phase_log.FindLog(context).data()
     names = [PHASE_NAMES[int(p)] for p in dict.fromkeys(phases[0])]
-    assert names == ["PASS", "MOVE", "APPROACH", "DESCEND", "PRESS", "KEEP", "LIFT", "DONE"]
+    assert names == ["PASS", "MOVE", "REST", "APPROACH", "DESCEND", "PRESS", "KEEP", "LIFT", "DONE"]
+    assert np.sum(phases[0] == REST) * 0.01 == pytest.approx(0.3, abs=0.02)
     keep = phases[0] == KEEP
     # Pressed on by press_extra of the descent beyond where it was felt, and held there 1.5 s.
     assert np.all(np.abs(q[keep] - 0.05) < 0.002)

@@ -278,7 +278,7 @@ def _add_touch_motion(builder, world: _World, scenario: Scenario, babble):
     touch = builder.AddSystem(TouchMotion(
         postures, descend_duration=descent / tm.descend_speed, keep_touching=tm.keep_touching,
         press_extra=tm.press_extra / descent, max_speed=tm.max_speed,
-        start_delay=tm.start_delay, repeat=tm.repeat, period=scenario.motion.period))
+        start_delay=tm.start_delay, repeat=tm.repeat, period=scenario.motion.period, rest=tm.rest))
     touch.set_name("touch_motion")
     builder.Connect(babble, touch.GetInputPort("babble_state"))
     builder.ExportInput(touch.GetInputPort("start"), "touch_start")

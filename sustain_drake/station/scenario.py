@@ -205,6 +205,7 @@ class TouchMotionConfig:
     press_extra: float = 0.004  # m pressed on beyond where the touch was felt
     keep_touching: float = 2.0  # s the touch is kept once felt
     start_delay: float = 3.0  # s after touch_start rises (the pause after identification)
+    rest: float = 0.5  # s of rest above each target before approaching (observation samples)
     max_speed: float = 0.5  # rad/s peak joint speed of the moves between touches
     repeat: bool = True  # start again with the first target after the last
 
@@ -355,10 +356,10 @@ def validate_scenario(s: Scenario) -> None:
             _finite(list(g.p_TQ) + list(g.down_T) + list(g.p_WQ), f"touch_motion.targets[{i}]")
             _check(any(g.down_T), f"touch_motion.targets[{i}]: down_T must not be zero")
         _finite([tm.approach_height, tm.retreat_height, tm.press_depth, tm.descend_speed, tm.press_extra,
-                 tm.keep_touching, tm.start_delay, tm.max_speed], "touch_motion values")
+                 tm.keep_touching, tm.start_delay, tm.max_speed, tm.rest], "touch_motion values")
         _check(tm.approach_height > 0 and tm.retreat_height >= tm.approach_height
                and tm.press_depth > 0 and tm.descend_speed > 0
-               and tm.max_speed > 0 and tm.keep_touching >= 0 and tm.start_delay >= 0
+               and tm.max_speed > 0 and tm.keep_touching >= 0 and tm.start_delay >= 0 and tm.rest >= 0
                and 0 <= tm.press_extra <= tm.approach_height + tm.press_depth,
                "touch_motion: heights, speeds must be > 0, times >= 0, press_extra within the "
                "descent")

@@ -11,8 +11,9 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from sustain_drake.systems.motion_generator import quintic
 
 # Phases of the touching program.
-PASS, MOVE, APPROACH, DESCEND, PRESS, KEEP, LIFT, RELEASE, HANDBACK, DONE = range(10)
-PHASE_NAMES = ("PASS", "MOVE", "APPROACH", "DESCEND", "PRESS", "KEEP", "LIFT", "RELEASE", "HANDBACK", "DONE")
+PASS, MOVE, REST, APPROACH, DESCEND, PRESS, KEEP, LIFT, RELEASE, HANDBACK, DONE = range(11)
+PHASE_NAMES = ("PASS", "MOVE", "REST", "APPROACH", "DESCEND", "PRESS", "KEEP", "LIFT", "RELEASE", "HANDBACK",
+               "DONE")
 # Layout of the header of the discrete state.
 _PHASE, _INDEX, _T0, _DURATION, _START_SINCE, _TOUCH_S, _DETECTED, _MISSED = range(8)
 _HEADER = 8
@@ -53,7 +54,8 @@ class TouchMotion(LeafSystem):
 
     1. MOVE: a minimum-jerk move (peak joint speed ``max_speed``) to ``q_high``, well above the
        table (moves between touches change the tool's orientation, which sweeps its corners),
-       then APPROACH ``q_above``;
+       REST there ``rest`` s (quasi-static samples: the identify <-> observe rule keeps
+       observing the held body between touches), then APPROACH ``q_above``;
     2. DESCEND: towards ``q_press`` at a constant rate (``descend_duration`` s for the whole way);
     3. the "keep touching" rule (paper §4.4): when ``touch`` (1, the touch estimator's flag)
        rises, PRESS on by ``press_extra`` of the descent (a fraction, 0..1) and KEEP the
@@ -62,8 +64,9 @@ class TouchMotion(LeafSystem):
 
     After the last posture it starts again from the first if ``repeat``, else it holds (DONE).
     When ``start`` falls during the program (the body changed: identify again), the arm lifts
-    (RELEASE, to ``q_high``) and the babbling takes over smoothly (HANDBACK: a 1 s blend). ``phase`` (4) is
-    ``[phase, index of the touch, touches felt, misses]`` (phase: see ``PHASE_NAMES``).
+    (RELEASE, to ``q_high``) and the babbling takes over smoothly (HANDBACK: a 1 s blend).
+    ``phase`` (4) is ``[phase, index of the touch, touches felt, misses]`` (phase: see
+    ``PHASE_NAMES``).
 
     State: one discrete vector (phase, touch index, segment start time and duration, since when
     ``start`` is high, the descent fraction at the touch, counts, segment start and goal postures
@@ -72,7 +75,7 @@ class TouchMotion(LeafSystem):
 
     def __init__(self, postures: list[TouchPosture], descend_duration: float, keep_touching: float,
                  press_extra: float, max_speed: float, start_delay: float = 3.0, repeat: bool = True,
-                 period: float = 0.01, min_duration: float = 1.0):  # fmt: skip
+                 period: float = 0.01, min_duration: float = 1.0, rest: float = 0.0):  # fmt: skip
         super().__init__()
         if not postures:
             raise ValueError("TouchMotion needs at least one touch posture")
@@ -84,7 +87,7 @@ class TouchMotion(LeafSystem):
                 or not np.all(np.isfinite(self._above + self._press + self._high))):
             raise ValueError("touch postures need finite q_above and q_press of the same length")
         if not (descend_duration > 0 and keep_touching >= 0 and 0 <= press_extra <= 1 and max_speed > 0
-                and start_delay >= 0 and period > 0 and min_duration > 0):  # fmt: skip
+                and start_delay >= 0 and period > 0 and min_duration > 0 and rest >= 0):  # fmt: skip
             raise ValueError("TouchMotion: durations and speeds must be positive, press_extra in [0, 1]")
         self._n = n
         self._descend = float(descend_duration)
@@ -94,6 +97,7 @@ class TouchMotion(LeafSystem):
         self._delay = float(start_delay)
         self._repeat = bool(repeat)
         self._min_duration = float(min_duration)
+        self._rest = float(rest)
         x0 = np.zeros(_HEADER + 3 * n)
         x0[_START_SINCE] = -1.0
         x0[_TOUCH_S] = -1.0
@@ -176,6 +180,8 @@ class TouchMotion(LeafSystem):
         elif not start and phase != RELEASE:
             self._move_to(x, t, RELEASE, q, v, self._high[k])
         elif phase == MOVE and ended:
+            self._start(x, t, REST, q, q, self._rest)
+        elif phase == REST and ended:
             self._move_to(x, t, APPROACH, q, v, self._above[k])
         elif phase == APPROACH and ended:
             self._start(x, t, DESCEND, self._above[k], self._press[k], self._descend)
