@@ -278,14 +278,14 @@ def test_touch_motion_keeps_touching_once_felt():
 
 
 def test_inertia_touch_end_to_end(tmp_path):
-    """The scenario's first 19 s: identified, paused, and the first touch felt and located."""
+    """The scenario's first 20 s: identified, paused, and the first touch felt and located."""
     s = load_scenario(SCENARIO)
     builder = DiagramBuilder()
     station = builder.AddSystem(build_station(s))
     handle = kinesthetic.add_to_diagram(builder, station, s)
     diagram = builder.Build()
     simulator = Simulator(diagram)
-    simulator.AdvanceTo(19.0)
+    simulator.AdvanceTo(20.0)
     metrics = kinesthetic.finish(handle, diagram, simulator.get_context(), tmp_path)
     assert [e["kind"] for e in metrics["events"]] == [coordination.CONVERGED]
     assert 3.0 < metrics["identification_time_s"] < 12.0
