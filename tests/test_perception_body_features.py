@@ -25,10 +25,13 @@ def trial_state(trial_count, t0, cells=(0,), n_c=4, window=0.3):
     return s
 
 
-def run(mem, state, t0, t1, ids, cell, flow_at):
-    """Step from t0 to t1; ``flow_at(t)`` gives the per-feature flow magnitude (px/frame)."""
+def run(mem, state, t0, t1, ids, cell, flow_at, arm_moving=True):
+    """Step from t0 to t1; ``flow_at(t)`` gives the per-feature flow magnitude (px/frame); the
+    arm moves all along unless ``arm_moving`` is False."""
     for k in range(int(round((t1 - t0) / DT))):
         t = t0 + (k + 1) * DT
+        if arm_moving:
+            state.last_motion_a[:] = t
         mags = np.asarray(flow_at(t), float)
         mem = update_feature_memory(mem, state, t, ids, cell, np.stack([mags, 0 * mags], 1))
     return mem
@@ -50,7 +53,8 @@ def test_two_trial_onsets_make_a_feature_body_and_nothing_else_does():
         state = trial_state(trial, t0)
         mem = run(mem, state, t0 - 0.5, t0 + 1.0, ids, cell, flows(t0))
         # between trials, everything rests for a while
-        mem = run(mem, trial_state(trial, t0), t0 + 1.0, t0 + 1.5, ids, cell, lambda t: [0] * 4)
+        mem = run(mem, trial_state(trial, t0), t0 + 1.0, t0 + 1.5, ids, cell, lambda t: [0] * 4,
+                  arm_moving=False)
     on = features_on_body(mem, ids)
     assert on.tolist() == [True, False, False, False]
     assert features_on_body(mem, np.array([3, 7])).tolist() == [False, True]
@@ -99,3 +103,18 @@ def test_a_feature_seeded_while_moving_has_no_onset():
     mem = run(mem, state, 0.5, 1.0, ids[1:], cell[1:], lambda t: [0.0])
     mem = run(mem, state, 1.0, 1.4, ids, cell, lambda t: [0.5, 0.5 * (t > 1.1)])
     assert mem.hits.tolist() == [0.0, 1.0]
+
+
+def test_a_body_feature_moving_while_the_arm_is_still_loses_its_hits():
+    """Eq. (26) per feature: a confirmed track that moves while every actuator has been still
+    for 0.3 s (it slid off the arm onto a passing person) is no longer body."""
+    mem = FeatureMemory(np.array([1, 2]), np.full(2, -1.0), np.array([2.0, 2.0]),
+                        np.array([2.0, 2.0]))
+    state = trial_state(2, 0.0)
+    state.last_motion_a[:] = 1.0                     # the arm stopped at 1.0 s
+    mem = run(mem, state, 1.0, 1.2, np.array([1, 2]), np.array([0, 0]),
+              lambda t: [0.5, 0.0], arm_moving=False)
+    assert features_on_body(mem, np.array([1, 2])).tolist() == [True, True]   # within 0.3 s
+    mem = run(mem, state, 1.2, 1.5, np.array([1, 2]), np.array([0, 0]),
+              lambda t: [0.5, 0.0], arm_moving=False)
+    assert features_on_body(mem, np.array([1, 2])).tolist() == [False, True]

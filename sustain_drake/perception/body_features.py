@@ -8,6 +8,8 @@ feature follows the body. A feature gets a *hit* when, during a confirming trial
 cell under test and its own flow rises up from 0 (moving after ``quiet`` s without motion)
 within the trial's response window after the actuator onset; at most one hit per trial. A
 feature must have been tracked at rest for ``quiet`` s before its flow can rise from 0. A
+feature that moves while every actuator has been still for ``still_after`` s is not the body
+(Eq. (26): a track that slid off the arm onto a passing person) and loses its hits. A
 feature is on the body once it has ``hits`` hits (default 2), from different trials.
 
 A distractor's feature rarely qualifies: while it keeps moving (a person walking) it has no
@@ -30,9 +32,12 @@ class FeatureParams:
     quiet: float = 0.1               # s without motion before the feature's flow "rises from 0"
     hits: int = 2                    # trial hits that make a feature body
     skip_known_cells: bool = True    # cells holding a body feature raise no confirming request
+    still_after: float = 0.3         # s: a feature moving when every actuator has been still this
+    #                                  long is not the body (Eq. (26)): it loses its hits
 
     def __post_init__(self):
-        if not (self.flow_threshold_px > 0 and self.quiet >= 0 and self.hits >= 1):
+        if not (self.flow_threshold_px > 0 and self.quiet >= 0 and self.hits >= 1
+                and self.still_after > 0):
             raise ValueError(f"invalid feature parameters {self}")
 
 
@@ -92,6 +97,10 @@ def update_feature_memory(mem: FeatureMemory, state: CoincidenceState, t: float,
     moving = np.linalg.norm(flow, axis=1) >= params.flow_threshold_px
     onset = moving & (t - out.last_motion > params.quiet)
     out.last_motion[moving] = t
+    # Counter-evidence (Eq. (26)): the body does not move while every actuator is still. A
+    # track that does (one that slid off the arm onto a passing person) loses its hits.
+    if t - state.last_motion_a.max() > params.still_after:
+        out.hits[moving] = 0
     in_window = state.trial_t0 < t <= state.trial_until + 1e-9
     if in_window:
         tested = np.zeros(cell.size, bool)
