@@ -306,7 +306,9 @@ def plot(handle, diagram, context, metrics, path: Path) -> None:
     axes[1].axhline(handle.scenario.hand_eye.coordination.max_ssd, color="r", ls="--", lw=0.8)
     axes[1].set_ylabel("SSD")
     observing = mode[:, 0] == coordination.OBSERVE
-    s_t = np.where(observing & np.isfinite(observation[:, 1]), observation[:, 1], np.nan)
+    # Only the logged samples with a new observation (the observed point was seen since the last).
+    new = np.concatenate([[False], np.diff(observation[:, 0]) > 0])
+    s_t = np.where(observing & new & np.isfinite(observation[:, 1]), observation[:, 1], np.nan)
     axes[2].semilogy(t, np.maximum(s_t, 1e-12), ".", ms=1.5, label="$s_t$ (m$^2$)")
     axes[2].semilogy(t, np.where(observing, sigma[:, 0], np.nan), "r", lw=1, label="allowable error")
     axes[2].set_ylabel("error")
