@@ -45,8 +45,8 @@ def simulate(diagram, t: float):
     return simulator.get_context()
 
 
-def test_the_three_scenarios_exist():
-    assert {p.name for p in SCENARIOS} == {
+def test_the_papers_three_scenarios_exist():
+    assert {p.name for p in SCENARIOS} >= {
         "body_detection.yaml", "hand_eye.yaml", "inertia_touch.yaml"}
 
 
