@@ -139,7 +139,7 @@ class BodyDetectionEvaluation(LeafSystem):
         cells = self._cells.Eval(context) > 0
         features = self._feature_cells.Eval(context) > 0
         sdot = self._sdot.Eval(context)
-        mask = self.scored_mask(context)
+        mask = cells | features if self._score_features else cells
         ev.update(t, labels.data, mask, sdot, parts={"cells": cells, "features": features})
         state.get_mutable_discrete_state(self._state).set_value(
             np.concatenate([[t], ev.to_vector()]))
