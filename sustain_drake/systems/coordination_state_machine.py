@@ -42,7 +42,9 @@ class CoordinationStateMachine(LeafSystem):
     of ``coordination.Event``: every convergence and change detection with its time).
 
     Every ``period`` seconds (a periodic unrestricted update, at the identifier's rate) it applies
-    ``coordination.step``. State: the rule's vector and the adopted ``x`` (discrete), the adopted
+    ``coordination.step``, with the solution's ``num_samples``: after a change detection, a solution
+    with more samples than arrived since (the identifier's reset takes effect one update later) is
+    stale and not adopted. State: the rule's vector and the adopted ``x`` (discrete), the adopted
     solution and the event log (abstract).
     """
 
