@@ -68,6 +68,7 @@ def test_scripted_tool_point_on_the_station_detects_a_slip_and_a_head_move():
     scenario.hand_eye.candidates.confirm_with_witness = False  # one scripted point
     config = scenario.hand_eye.coordination
     config.allowable_error_factor = 100.0  # the paper's: the scripted noise is Gaussian
+    config.min_gap_ratio = 10.0
     builder = DiagramBuilder()
     station = builder.AddSystem(build_station(scenario))
     source = builder.AddSystem(ScriptedToolPoint())
