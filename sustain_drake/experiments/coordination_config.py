@@ -4,7 +4,12 @@
 import dataclasses
 
 from sustain_drake.identification.coordination import CoordinationRule
+from sustain_drake.identification.eye_to_hand import default_criteria
 from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria
+
+# The defaults are the math layer's (eye-to-hand criteria, the paper's rule): one place each.
+_CRITERIA = default_criteria()
+_RULE = CoordinationRule()
 
 
 @dataclasses.dataclass
@@ -16,14 +21,14 @@ class CoordinationConfig:
     rotation.
     """
 
-    max_expected_rms: float = 0.010
-    min_gap_ratio: float = 10.0
-    max_ssd: float = 0.1
-    min_samples: int = 10
+    max_expected_rms: float = _CRITERIA.max_expected_rms
+    min_gap_ratio: float = _CRITERIA.min_gap_ratio
+    max_ssd: float = _CRITERIA.max_ssd
+    min_samples: int = _CRITERIA.min_samples
     forgetting_factor: float = 1.0
-    allowable_error_factor: float = 100.0
-    max_consecutive_violations: int = 10
-    pause_after_convergence: float = 3.0
+    allowable_error_factor: float = _RULE.allowable_error_factor
+    max_consecutive_violations: int = _RULE.max_consecutive_violations
+    pause_after_convergence: float = _RULE.pause_after_convergence
 
     def criteria(self, has_rotation: bool = True) -> ConvergenceCriteria:
         return ConvergenceCriteria(

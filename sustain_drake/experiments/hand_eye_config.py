@@ -2,35 +2,32 @@
 
 # No "from __future__ import annotations": yaml_load_typed needs the real field types.
 import dataclasses
+import typing
 from dataclasses import field
 
 from sustain_drake.experiments.coordination_config import CoordinationConfig
 from sustain_drake.identification.candidates import CandidateParams
 
 
-@dataclasses.dataclass
-class CandidatesConfig:
-    """Candidate tracked points (paper Fig. 7): see ``identification.candidates.CandidateParams``
-    (SI units)."""
+def _scenario_mirror(params_class, name: str, doc: str):
+    """A mutable dataclass with the fields, defaults and (resolved) types of the frozen
+    ``params_class``, for a scenario section (yaml_load_typed needs real types and a mutable
+    dataclass), and ``params()`` to make the params. One list of fields: no defaults to drift."""
+    hints = typing.get_type_hints(params_class)
+    fields = [(f.name, hints[f.name], field(default=f.default)) for f in dataclasses.fields(params_class)]
 
-    max_candidates: int = 8
-    max_hand_radius: float = 0.6
-    gate_margin: float = 0.01
-    max_lost_time: float = 2.0
-    max_unconverged_time: float = 30.0
-    reacquire_radius: float = 0.01
-    reject_rms: float = 0.02
-    use_body_cells: bool = True
-    observation_jump: float = 0.15
-    observe_min_samples: int = 100
-    observe_consistency: float = 3.0
-    primary_failures: int = 10
-    keep_camera: bool = True
-    confirm_with_witness: bool = True
-    min_rotation_spread: float = 0.15
+    def params(self):
+        return params_class(**dataclasses.asdict(self))
 
-    def params(self) -> CandidateParams:
-        return CandidateParams(**dataclasses.asdict(self))
+    return dataclasses.make_dataclass(name, fields, namespace={"params": params, "__doc__": doc})
+
+
+CandidatesConfig = _scenario_mirror(
+    CandidateParams,
+    "CandidatesConfig",
+    "Candidate tracked points (paper Fig. 7): see ``identification.candidates.CandidateParams`` "
+    "(SI units).",
+)
 
 
 @dataclasses.dataclass
