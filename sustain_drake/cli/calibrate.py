@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sustain_drake.calibration_export import camera_config_yaml
 from sustain_drake.cli.common import EXIT_NOT_CONVERGED, EXIT_OK, CliError, write_atomically
 from sustain_drake.identification import ConvergenceCriteria, IdentificationError, calibrate_eye_to_hand
 from sustain_drake.identification import eye_to_hand as eye_to_hand_formulation
@@ -42,6 +43,8 @@ def register(subparsers) -> None:
         "--poses", required=True, type=Path, help="CSV of the hand poses X_WH (m, quaternion or rpy)"
     )
     p.add_argument("--out", type=Path, help="write the result as YAML (Drake Transform: m, rpy in deg)")
+    p.add_argument("--camera-config", type=Path,
+                   help="also write X_WC as a Drake CameraConfig YAML (X_PB in the world)")
     defaults = eye_to_hand_formulation.default_criteria()
     p.add_argument(
         "--max-rms",
@@ -80,9 +83,15 @@ def _criteria(args) -> ConvergenceCriteria:
 
 
 def run_eye_to_hand(
-    points: Path, poses: Path, out: Path | None, criteria: ConvergenceCriteria, stream=sys.stdout
+    points: Path,
+    poses: Path,
+    out: Path | None,
+    criteria: ConvergenceCriteria,
+    stream=sys.stdout,
+    camera_config: Path | None = None,
 ) -> int:
-    """Reads, calibrates, prints and (if converged) writes the YAML. Returns the exit code."""
+    """Reads, calibrates, prints and (if converged) writes the YAML result and, if asked, the
+    camera pose as a Drake ``CameraConfig``. Returns the exit code."""
     try:
         p_C = read_points_csv(points)
         X_WH = read_poses_csv(poses)
@@ -101,8 +110,9 @@ def run_eye_to_hand(
     print_eye_to_hand(result, points, poses, stream)
     if not result.converged:
         print(f"sustain-drake: {result.verdict}", file=sys.stderr)
-        if out is not None:
-            print(f"{out} not written (not converged)", file=stream)
+        for path in (out, camera_config):
+            if path is not None:
+                print(f"{path} not written (not converged)", file=stream)
         return EXIT_NOT_CONVERGED
     if out is not None:
         try:
@@ -110,6 +120,12 @@ def run_eye_to_hand(
         except OSError as e:
             raise CliError(f"{out}: cannot write: {e.strerror or e}") from None
         print(f"wrote {out}", file=stream)
+    if camera_config is not None:
+        try:
+            write_atomically(camera_config, camera_config_yaml(result.X_WC, name="calibrated_camera"))
+        except OSError as e:
+            raise CliError(f"{camera_config}: cannot write: {e.strerror or e}") from None
+        print(f"wrote {camera_config}", file=stream)
     return EXIT_OK
 
 
@@ -143,4 +159,5 @@ def print_eye_to_hand(result, points, poses, stream) -> None:
 
 
 def _run_eye_to_hand(args: argparse.Namespace) -> int:
-    return run_eye_to_hand(args.points, args.poses, args.out, _criteria(args))
+    return run_eye_to_hand(args.points, args.poses, args.out, _criteria(args),
+                           camera_config=args.camera_config)
