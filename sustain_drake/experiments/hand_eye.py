@@ -32,12 +32,12 @@ from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.station import ScenarioError, camera_info
 from sustain_drake.station.scenario import ARM_JOINTS, HeadMove, ToolSlip
+from sustain_drake.sustainable_coordination import add_hand_eye_loop
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.ground_truth import PoseToVector
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
-from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation
 
 # Logged signals: (system key, output port).
 _LOGGED = (("candidates", "eigenvalues"), ("candidates", "ssd"), ("candidates", "observation"),
@@ -63,43 +63,17 @@ def build_loop(builder, station, scenario):
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("depth_image")):
         raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
     try:
-        criteria, rule = config.coordination.criteria(), config.coordination.rule()
-        candidate_params = config.candidates.params()
-        coincidence_params = perception.coincidence_params()
-        feature_params, tracker_params = perception.feature_params(), perception.tracker_params()
+        loop = add_hand_eye_loop(builder, camera_info(scenario), len(ARM_JOINTS), scenario.camera.fps,
+                                 config, perception)  # fmt: skip
     except ValueError as e:
         raise ScenarioError(f"hand_eye: {e}") from None
-    period = 1.0 / scenario.camera.fps
-    # Tracker and detector as in the body_detection experiment (its scenario section's settings,
-    # its offsets: the tracker a quarter frame after the camera samples, the detector half a frame).
-    tracker = builder.AddSystem(OpticalFlowTracker(
-        camera_info(scenario), (perception.grid_rows, perception.grid_cols), period=period,
-        offset=0.25 * period, params=tracker_params))
-    tracker.set_name("optical_flow_tracker")
-    detector = builder.AddSystem(MotionCoincidenceDetector(
-        len(ARM_JOINTS), tracker.grid.num_cells, period=period, offset=0.5 * period,
-        params=coincidence_params, feature_params=feature_params))
-    detector.set_name("motion_coincidence_detector")
-    formulation = EyeToHandFormulation(criteria, config.coordination.forgetting_factor)
-    candidates = builder.AddSystem(CandidateIdentifiers(formulation, candidate_params, period))
-    candidates.set_name("candidate_identifiers")
-    machine = builder.AddSystem(CoordinationStateMachine(16, rule, period))
-    machine.set_name("coordination_state_machine")
+    tracker, detector, candidates, machine = loop.tracker, loop.detector, loop.candidates, loop.state_machine
     for name in ("color_image", "depth_image", "image_time"):
         builder.Connect(station.GetOutputPort(name), tracker.GetInputPort(name))
     builder.Connect(station.GetOutputPort("joint_positions"), detector.GetInputPort("actuator_positions"))
-    builder.Connect(tracker.GetOutputPort("visual_change"), detector.GetInputPort("visual_change"))
-    builder.Connect(tracker.GetOutputPort("tracked_features"), detector.GetInputPort("tracked_features"))
     if perception.confirm:  # the detector's confirming motions (paper §3.3), as in body_detection
         builder.Connect(detector.GetOutputPort("confirm"), station.GetInputPort("motion_confirm"))
-    builder.Connect(tracker.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
-    builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
-    builder.Connect(candidates.GetOutputPort("solution"), machine.GetInputPort("solution"))
-    builder.Connect(candidates.GetOutputPort("observation"), machine.GetInputPort("observation"))
-    builder.Connect(machine.GetOutputPort("adopted_x"), candidates.GetInputPort("reference_x"))
-    builder.Connect(machine.GetOutputPort("reset"), candidates.GetInputPort("reset"))
-    builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     return tracker, detector, candidates, machine
 

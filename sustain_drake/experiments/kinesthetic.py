@@ -26,12 +26,10 @@ from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 from sustain_drake.cli.common import write_atomically
 from sustain_drake.identification import coordination
 from sustain_drake.station.build import HAND_BODY, SENSOR_JOINT
+from sustain_drake.station.scenario import ARM_JOINTS
+from sustain_drake.sustainable_coordination import add_payload_loop
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
-from sustain_drake.systems.quasi_static_gate import QuasiStaticGate
-from sustain_drake.systems.sustainable_identifier_system import (
-    PayloadFormulation,
-    SustainableIdentifierSystem,
-)
+from sustain_drake.systems.sustainable_identifier_system import SustainableIdentifierSystem
 from sustain_drake.systems.touch_estimator import TouchEstimator
 
 
@@ -64,39 +62,20 @@ def held_shape(station):
 
 def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> KinestheticHandle:
     config = scenario.kinesthetic
-    c, qs = config.coordination, config.quasi_static
     if scenario.tool.model == "none":
         raise ValueError("kinesthetic: the scenario holds no tool")
-    ident = builder.AddSystem(SustainableIdentifierSystem(
-        PayloadFormulation(criteria=c.criteria(has_rotation=False), forgetting_factor=c.forgetting_factor),
-        period=config.period))  # fmt: skip
-    ident.set_name("payload_identifier")
-    sm = builder.AddSystem(CoordinationStateMachine(PayloadFormulation.num_unknowns, c.rule(), config.period))
-    sm.set_name("payload_coordination")
-    gate = builder.AddSystem(QuasiStaticGate(
-        5, config.period, qs.max_joint_speed, qs.max_joint_acceleration, qs.window, qs.touch_holdoff,
-        qs.max_touch_duration))  # fmt: skip
-    gate.set_name("quasi_static_gate")
     plant = station.GetSubsystemByName("plant")
     if not plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame().IsExactlyIdentity():
         raise ValueError("kinesthetic: the sensor frame K must be the hand frame H (X_WH is used as X_WK)")
     shape, X_KG = held_shape(station)
-    estimator = builder.AddSystem(TouchEstimator(shape, X_KG, min_force=config.min_touch_force))
-    estimator.set_name("touch_estimator")
+    loop = add_payload_loop(builder, len(ARM_JOINTS), config, shape, X_KG)
+    ident, sm, gate, estimator = loop.identifier, loop.state_machine, loop.gate, loop.estimator
 
     wrench, X_WK = station.GetOutputPort("wrench"), station.GetOutputPort("X_WH")  # K = H
     for system in (ident, estimator):
         builder.Connect(wrench, system.GetInputPort("wrench"))
         builder.Connect(X_WK, system.GetInputPort("X_WK"))
     builder.Connect(station.GetOutputPort("joint_velocities"), gate.GetInputPort("joint_velocities"))
-    builder.Connect(estimator.GetOutputPort("touch"), gate.GetInputPort("touch"))
-    builder.Connect(gate.GetOutputPort("sample_valid"), ident.GetInputPort("sample_valid"))
-    builder.Connect(ident.GetOutputPort("solution"), sm.GetInputPort("solution"))
-    builder.Connect(ident.GetOutputPort("observation"), sm.GetInputPort("observation"))
-    builder.Connect(sm.GetOutputPort("adopted_x"), ident.GetInputPort("reference_x"))
-    builder.Connect(sm.GetOutputPort("reset"), ident.GetInputPort("reset"))
-    builder.Connect(sm.GetOutputPort("adopted_solution"), estimator.GetInputPort("payload"))
-    builder.Connect(sm.GetOutputPort("allowable_error"), estimator.GetInputPort("allowable_error"))
     builder.Connect(sm.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     if station.HasInputPort("touch_start"):
         builder.Connect(sm.GetOutputPort("mode"), station.GetInputPort("touch_start"))

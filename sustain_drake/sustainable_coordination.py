@@ -1,0 +1,303 @@
+"""The whole sustainable sensory-motor coordination as one Diagram for any controller and any arm.
+
+``make_sustainable_coordination`` combines the hand-eye loop (paper §3.4, Fig. 7: optical-flow
+tracker -> Eq. (27) motion coincidence detector -> candidate eye-to-hand identifiers <->
+identify/observe state machine) and the kinesthetic loop (§3.5: quasi-static gate -> payload
+identifier, Eqs. (37)-(38) <-> its own state machine, and optionally the touch estimator on the
+held object). ``add_hand_eye_loop`` and ``add_payload_loop`` are the wiring shared with the
+experiments (``experiments.hand_eye``, ``experiments.kinesthetic``): one place for it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+
+from sustain_drake.experiments.body_detection_config import BodyDetectionConfig
+from sustain_drake.experiments.hand_eye_config import HandEyeConfig
+from sustain_drake.experiments.kinesthetic_config import KinestheticConfig
+from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
+from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
+from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
+from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
+from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
+from sustain_drake.systems.quasi_static_gate import QuasiStaticGate
+from sustain_drake.systems.sustainable_identifier_system import (
+    EyeToHandFormulation,
+    PayloadFormulation,
+    SustainableIdentifierSystem,
+)
+from sustain_drake.systems.touch_estimator import TouchEstimator
+
+
+@dataclass
+class HandEyeLoop:
+    tracker: OpticalFlowTracker
+    detector: MotionCoincidenceDetector
+    candidates: CandidateIdentifiers
+    state_machine: CoordinationStateMachine
+
+
+@dataclass
+class PayloadLoop:
+    identifier: SustainableIdentifierSystem
+    state_machine: CoordinationStateMachine
+    gate: QuasiStaticGate
+    estimator: TouchEstimator | None
+
+
+def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: HandEyeConfig,
+                      perception: BodyDetectionConfig) -> HandEyeLoop:  # fmt: skip
+    """Adds the tracker, detector, candidate identifiers and state machine, connected to each other.
+    Left for the caller: the tracker's images, the detector's ``actuator_positions``, the
+    candidates' ``X_WH``, and the uses of ``detector.confirm`` and ``state_machine.pause``.
+    Raises ValueError on bad settings."""
+    criteria, rule = hand_eye.coordination.criteria(), hand_eye.coordination.rule()
+    candidate_params = hand_eye.candidates.params()
+    coincidence_params = perception.coincidence_params()
+    feature_params, tracker_params = perception.feature_params(), perception.tracker_params()
+    period = 1.0 / fps
+    # The tracker a quarter frame after the camera samples, the detector half a frame.
+    tracker = builder.AddSystem(OpticalFlowTracker(
+        info, (perception.grid_rows, perception.grid_cols), period=period, offset=0.25 * period,
+        params=tracker_params))  # fmt: skip
+    tracker.set_name("optical_flow_tracker")
+    detector = builder.AddSystem(MotionCoincidenceDetector(
+        num_joints, tracker.grid.num_cells, period=period, offset=0.5 * period,
+        params=coincidence_params, feature_params=feature_params))  # fmt: skip
+    detector.set_name("motion_coincidence_detector")
+    formulation = EyeToHandFormulation(criteria, hand_eye.coordination.forgetting_factor)
+    candidates = builder.AddSystem(CandidateIdentifiers(formulation, candidate_params, period))
+    candidates.set_name("candidate_identifiers")
+    machine = builder.AddSystem(CoordinationStateMachine(16, rule, period))
+    machine.set_name("coordination_state_machine")
+    builder.Connect(tracker.GetOutputPort("visual_change"), detector.GetInputPort("visual_change"))
+    builder.Connect(tracker.GetOutputPort("tracked_features"), detector.GetInputPort("tracked_features"))
+    builder.Connect(tracker.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
+    builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
+    builder.Connect(candidates.GetOutputPort("solution"), machine.GetInputPort("solution"))
+    builder.Connect(candidates.GetOutputPort("observation"), machine.GetInputPort("observation"))
+    builder.Connect(machine.GetOutputPort("adopted_x"), candidates.GetInputPort("reference_x"))
+    builder.Connect(machine.GetOutputPort("reset"), candidates.GetInputPort("reset"))
+    builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
+    return HandEyeLoop(tracker, detector, candidates, machine)
+
+
+def add_payload_loop(builder, num_joints: int, config: KinestheticConfig, shape=None,
+                     X_KG: RigidTransform | None = None) -> PayloadLoop:  # fmt: skip
+    """Adds the payload identifier, its state machine, the quasi-static gate and (if ``shape``, the
+    held object's ``pydrake.geometry`` shape at ``X_KG`` in the sensor frame) the touch estimator,
+    connected to each other. Left for the caller: ``wrench`` and ``X_WK`` of the identifier and
+    the estimator, the gate's ``joint_velocities``, the use of ``state_machine.pause``."""
+    c, qs = config.coordination, config.quasi_static
+    ident = builder.AddSystem(SustainableIdentifierSystem(
+        PayloadFormulation(criteria=c.criteria(has_rotation=False), forgetting_factor=c.forgetting_factor),
+        period=config.period))  # fmt: skip
+    ident.set_name("payload_identifier")
+    sm = builder.AddSystem(CoordinationStateMachine(PayloadFormulation.num_unknowns, c.rule(), config.period))
+    sm.set_name("payload_coordination")
+    gate = builder.AddSystem(QuasiStaticGate(
+        num_joints, config.period, qs.max_joint_speed, qs.max_joint_acceleration, qs.window, qs.touch_holdoff,
+        qs.max_touch_duration))  # fmt: skip
+    gate.set_name("quasi_static_gate")
+    estimator = None
+    if shape is not None:
+        estimator = builder.AddSystem(TouchEstimator(shape, X_KG, min_force=config.min_touch_force))
+        estimator.set_name("touch_estimator")
+        # A touch keeps its samples out of the identifier (see QuasiStaticGate).
+        builder.Connect(estimator.GetOutputPort("touch"), gate.GetInputPort("touch"))
+        builder.Connect(sm.GetOutputPort("adopted_solution"), estimator.GetInputPort("payload"))
+        builder.Connect(sm.GetOutputPort("allowable_error"), estimator.GetInputPort("allowable_error"))
+    builder.Connect(gate.GetOutputPort("sample_valid"), ident.GetInputPort("sample_valid"))
+    builder.Connect(ident.GetOutputPort("solution"), sm.GetInputPort("solution"))
+    builder.Connect(ident.GetOutputPort("observation"), sm.GetInputPort("observation"))
+    builder.Connect(sm.GetOutputPort("adopted_x"), ident.GetInputPort("reference_x"))
+    builder.Connect(sm.GetOutputPort("reset"), ident.GetInputPort("reset"))
+    return PayloadLoop(ident, sm, gate, estimator)
+
+
+class AdoptedEstimates(LeafSystem):
+    """The adopted (converged and still observed) estimates of the two state machines as plain ports.
+
+    .. pydrake_system::
+
+        name: AdoptedEstimates
+        input_ports:
+        - hand_eye_solution
+        - payload_solution
+        output_ports:
+        - X_WC
+        - p_HP
+        - payload_mass
+        - p_KCm
+
+    Inputs: the ``adopted_solution`` of the hand-eye and of the payload ``CoordinationStateMachine``
+    (None before an adoption and after a detected change). Outputs: ``X_WC`` (RigidTransform, the
+    camera pose), ``p_HP`` (3, m, the tool point in the hand frame), ``payload_mass`` (1, kg),
+    ``p_KCm`` (3, m, the payload's centre of mass in the sensor frame). With nothing adopted they
+    hold the identity, zeros and a zero mass (never NaN): read the ``*_mode`` outputs to know.
+    """
+
+    def __init__(self):
+        super().__init__()
+        self._hand_eye = self.DeclareAbstractInputPort("hand_eye_solution", AbstractValue.Make(object()))
+        self._payload = self.DeclareAbstractInputPort("payload_solution", AbstractValue.Make(object()))
+        self.DeclareAbstractOutputPort("X_WC", lambda: AbstractValue.Make(RigidTransform()), self._calc_X_WC)
+        self.DeclareVectorOutputPort("p_HP", 3, self._calc_p_HP)
+        self.DeclareVectorOutputPort("payload_mass", 1, self._calc_mass)
+        self.DeclareVectorOutputPort("p_KCm", 3, self._calc_p_KCm)
+
+    def _estimate(self, context):
+        return getattr(self._hand_eye.Eval(context), "estimate", None)
+
+    def _calc_X_WC(self, context, output) -> None:
+        est = self._estimate(context)
+        output.set_value(RigidTransform() if est is None else RigidTransform(est.X_WC))
+
+    def _calc_p_HP(self, context, output) -> None:
+        est = self._estimate(context)
+        output.SetFromVector(np.zeros(3) if est is None else est.p_HP)
+
+    def _calc_mass(self, context, output) -> None:
+        solution = self._payload.Eval(context)
+        output.SetAtIndex(0, 0.0 if solution is None else solution.mass)
+
+    def _calc_p_KCm(self, context, output) -> None:
+        solution = self._payload.Eval(context)
+        output.SetFromVector(np.zeros(3) if solution is None else solution.p_KCm)
+
+
+def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 30.0,
+                                  hand_eye: HandEyeConfig | None = None,
+                                  body_detection: BodyDetectionConfig | None = None,
+                                  kinesthetic: KinestheticConfig | None = None,
+                                  plant=None, hand_frame=None, sensor_frame=None, model_instance=None,
+                                  held_shape=None, X_KG: RigidTransform | None = None,
+                                  ) -> Diagram:  # fmt: skip
+    """The sustainable coordination of an arm with ``num_joints`` joints, a depth camera with
+    intrinsics ``camera_info`` (``pydrake.systems.sensors.CameraInfo``) at ``fps`` frames per
+    second, and a wrist force/torque sensor. Settings are the scenario sections' dataclasses
+    (defaults if None). With ``plant`` (a finalized MultibodyPlant of the arm) and ``hand_frame``
+    the hand pose (and the sensor pose, at ``sensor_frame``, else the hand's) is computed from the
+    joint positions (``HandPoseFromPlant``); else it is the ``X_WH`` input and the sensor frame K is
+    the hand frame H. ``held_shape`` (the held object's ``pydrake.geometry`` shape at ``X_KG`` in K)
+    adds the touch estimator.
+
+    .. pydrake_system::
+
+        name: SustainableCoordination
+        input_ports:
+        - color_image
+        - depth_image
+        - image_time (optional)
+        - joint_positions
+        - joint_velocities
+        - X_WH (without plant)
+        - wrench
+        output_ports:
+        - X_WC
+        - p_HP
+        - hand_eye_mode
+        - hand_eye_events
+        - hand_eye_allowable_error
+        - payload_mass
+        - p_KCm
+        - payload_mode
+        - payload_events
+        - touch (with held_shape)
+        - p_WP (with held_shape)
+        - f_env_W (with held_shape)
+        - motion_confirm
+        - hand_eye_pause
+        - payload_pause
+        - X_WH_used
+        - X_WK_used
+
+    Inputs: ``color_image`` (ImageRgba8U), ``depth_image`` (ImageDepth32F, m), ``image_time`` (1, s,
+    the capture time; unconnected: every frame is new), ``joint_positions`` and
+    ``joint_velocities`` (``num_joints``; velocities gate the quasi-static wrench samples),
+    ``X_WH`` (RigidTransform), ``wrench`` (6, ``[tau_K; f_K]`` applied by the wrist on the
+    outboard side, N m and N, in K; see ``identification.payload``).
+
+    Outputs: ``X_WC``, ``p_HP``, ``payload_mass``, ``p_KCm`` (adopted estimates, see
+    ``AdoptedEstimates``); ``hand_eye_mode`` and ``payload_mode`` (1: 0 identify, 1 observe);
+    ``*_events`` (the state machines' event lists); ``hand_eye_allowable_error`` (1, m^2);
+    the touch estimator's ``touch``, ``p_WP``, ``f_env_W``; for the user's motion generator
+    ``motion_confirm`` (the detector's confirming-motion request, paper §3.3) and
+    ``hand_eye_pause`` and ``payload_pause`` (2 each, ``[request_id, seconds]``: each state
+    machine asks the motion to stop after a convergence; a new id is a new request); ``X_WH_used``
+    and ``X_WK_used`` (the hand and sensor poses the loops use).
+    """
+    hand_eye = hand_eye or HandEyeConfig()
+    body_detection = body_detection or BodyDetectionConfig()
+    kinesthetic = kinesthetic or KinestheticConfig()
+    if plant is not None and hand_frame is None:
+        raise ValueError("make_sustainable_coordination: a plant needs its hand_frame")
+    builder = DiagramBuilder()
+    vision = add_hand_eye_loop(builder, camera_info, num_joints, fps, hand_eye, body_detection)
+    touch = add_payload_loop(builder, num_joints, kinesthetic, held_shape, X_KG)
+
+    for name in ("color_image", "depth_image", "image_time"):
+        builder.ExportInput(vision.tracker.GetInputPort(name), name)
+    joint_positions = builder.ExportInput(
+        vision.detector.GetInputPort("actuator_positions"), "joint_positions")  # fmt: skip
+    builder.ExportInput(touch.gate.GetInputPort("joint_velocities"), "joint_velocities")
+    if plant is not None:
+        fk = builder.AddSystem(HandPoseFromPlant(plant, hand_frame, sensor_frame, model_instance))
+        fk.set_name("hand_pose_from_plant")
+        if fk.get_input_port().size() != num_joints:
+            raise ValueError(f"make_sustainable_coordination: the plant has {fk.get_input_port().size()} "
+                             f"positions for num_joints = {num_joints}")  # fmt: skip
+        builder.ConnectInput(joint_positions, fk.get_input_port())
+        X_WH, X_WK = fk.GetOutputPort("X_WH"), fk.GetOutputPort("X_WK")
+    else:
+        passthrough = builder.AddSystem(_PosePassThrough())
+        builder.ExportInput(passthrough.get_input_port(), "X_WH")
+        X_WH = X_WK = passthrough.get_output_port()
+    builder.Connect(X_WH, vision.candidates.GetInputPort("X_WH"))
+    consumers = [touch.identifier] + ([touch.estimator] if touch.estimator is not None else [])
+    wrench = [system.GetInputPort("wrench") for system in consumers]
+    builder.ExportInput(wrench[0], "wrench")
+    for port in wrench[1:]:
+        builder.ConnectInput("wrench", port)
+    for system in consumers:
+        builder.Connect(X_WK, system.GetInputPort("X_WK"))
+
+    adopted = builder.AddSystem(AdoptedEstimates())
+    adopted.set_name("adopted_estimates")
+    for prefix, machine in (("hand_eye", vision.state_machine), ("payload", touch.state_machine)):
+        builder.Connect(machine.GetOutputPort("adopted_solution"), adopted.GetInputPort(f"{prefix}_solution"))
+    for name in ("X_WC", "p_HP", "payload_mass", "p_KCm"):
+        builder.ExportOutput(adopted.GetOutputPort(name), name)
+    for prefix, machine in (("hand_eye", vision.state_machine), ("payload", touch.state_machine)):
+        builder.ExportOutput(machine.GetOutputPort("mode"), f"{prefix}_mode")
+        builder.ExportOutput(machine.GetOutputPort("events"), f"{prefix}_events")
+    builder.ExportOutput(vision.state_machine.GetOutputPort("allowable_error"), "hand_eye_allowable_error")
+    if touch.estimator is not None:
+        for name in ("touch", "p_WP", "f_env_W"):
+            builder.ExportOutput(touch.estimator.GetOutputPort(name), name)
+    builder.ExportOutput(vision.detector.GetOutputPort("confirm"), "motion_confirm")
+    builder.ExportOutput(vision.state_machine.GetOutputPort("pause"), "hand_eye_pause")
+    builder.ExportOutput(touch.state_machine.GetOutputPort("pause"), "payload_pause")
+    builder.ExportOutput(X_WH, "X_WH_used")
+    builder.ExportOutput(X_WK, "X_WK_used")
+    diagram = builder.Build()
+    diagram.set_name("sustainable_coordination")
+    return diagram
+
+
+class _PosePassThrough(LeafSystem):
+    """One pose input fanned out inside the diagram (an exported input feeds several ports, and is
+    also exported as an output)."""
+
+    def __init__(self):
+        super().__init__()
+        port = self.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform()))
+        self.DeclareAbstractOutputPort(
+            "X_WH", lambda: AbstractValue.Make(RigidTransform()),
+            lambda context, output: output.set_value(port.Eval(context)))  # fmt: skip
+

@@ -1,0 +1,132 @@
+"""make_sustainable_coordination on an arm that is not ours: a 3-joint arm built here with the
+MultibodyPlant API, fed by scripted sensors (postures, images, the static wrench of a known
+payload)."""
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import FixedOffsetFrame, RevoluteJoint, SpatialInertia, UnitInertia
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
+from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
+
+from sustain_drake.identification import coordination
+from sustain_drake.sustainable_coordination import make_sustainable_coordination
+
+MASS, P_KCM = 0.8, np.array([0.02, -0.01, 0.09])  # the held payload, kg and m in K
+G_W = np.array([0.0, 0.0, -9.81])
+
+
+def three_joint_arm() -> MultibodyPlant:
+    """Yaw, pitch, roll: a wrist that can turn the payload through many orientations."""
+    plant = MultibodyPlant(0.0)
+    parent = plant.world_body()
+    axes = ([0, 0, 1], [0, 1, 0], [1, 0, 0])
+    for i, axis in enumerate(axes):
+        inertia = SpatialInertia(1.0, np.zeros(3), UnitInertia.SolidSphere(0.05))
+        body = plant.AddRigidBody(f"link{i + 1}", inertia)
+        # Each joint 0.3 m above the previous link's origin (the first 0.1 m above the world's).
+        F = plant.AddFrame(FixedOffsetFrame(f"mount{i + 1}", parent.body_frame(),
+                                            RigidTransform([0.0, 0.0, 0.3 if i else 0.1])))  # fmt: skip
+        plant.AddJoint(RevoluteJoint(f"joint{i + 1}", F, body.body_frame(), axis, 0.0))
+        parent = body
+    plant.Finalize()
+    return plant
+
+
+class ScriptedArm(LeafSystem):
+    """Stops at one posture after another (``period`` s each); outputs the joint positions and
+    the wrench of the payload at rest, from the test's own forward kinematics."""
+
+    def __init__(self, plant, postures, period):
+        super().__init__()
+        self._plant, self._postures, self._period = plant, np.asarray(postures), period
+        self.DeclareVectorOutputPort("q", plant.num_positions(), lambda c, o: o.SetFromVector(self._q(c)))
+        self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
+
+    def _q(self, context):
+        k = min(int(context.get_time() / self._period), len(self._postures) - 1)
+        return self._postures[k]
+
+    def _calc_wrench(self, context, output):
+        plant_context = self._plant.CreateDefaultContext()
+        self._plant.SetPositions(plant_context, self._q(context))
+        R_WK = self._plant.GetBodyByName("link3").EvalPoseInWorld(plant_context).rotation().matrix()
+        f_K = R_WK.T @ (-MASS * G_W)  # the wrist holds the payload up
+        # A real sensor's noise (0.02 N m, 0.1 N): noise-free data would make the allowable error
+        # of the observation rule vanish.
+        rng = np.random.default_rng(round(context.get_time() * 1e4))
+        noise = rng.normal(size=6) * ([0.02] * 3 + [0.1] * 3)
+        output.SetFromVector(np.concatenate([np.cross(P_KCM, f_K), f_K]) + noise)
+
+
+def _images(builder, info):
+    color = ImageRgba8U(info.width(), info.height())
+    depth = ImageDepth32F(info.width(), info.height())
+    depth.mutable_data[:] = 1.0
+    return (builder.AddSystem(ConstantValueSource(AbstractValue.Make(color))),
+            builder.AddSystem(ConstantValueSource(AbstractValue.Make(depth))))  # fmt: skip
+
+
+def test_identifies_the_payload_of_a_three_joint_arm_from_its_plant():
+    plant = three_joint_arm()
+    hand = plant.GetBodyByName("link3").body_frame()
+    info = CameraInfo(160, 120, 1.0)
+    coordination_diagram = make_sustainable_coordination(info, 3, plant=plant, hand_frame=hand)
+    assert not coordination_diagram.HasInputPort("X_WH")
+    rng = np.random.default_rng(3)
+    postures = rng.uniform(-1.2, 1.2, size=(12, 3))
+    builder = DiagramBuilder()
+    sc = builder.AddSystem(coordination_diagram)
+    arm = builder.AddSystem(ScriptedArm(plant, postures, 0.25))
+    color, depth = _images(builder, info)
+    builder.Connect(color.get_output_port(), sc.GetInputPort("color_image"))
+    builder.Connect(depth.get_output_port(), sc.GetInputPort("depth_image"))
+    builder.Connect(arm.GetOutputPort("q"), sc.GetInputPort("joint_positions"))
+    builder.Connect(arm.GetOutputPort("wrench"), sc.GetInputPort("wrench"))
+    still = builder.AddSystem(ConstantVectorSource(np.zeros(3)))
+    builder.Connect(still.get_output_port(), sc.GetInputPort("joint_velocities"))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    sc_context = sc.GetMyContextFromRoot(context)
+    assert sc.GetOutputPort("payload_mode").Eval(sc_context)[0] == coordination.IDENTIFY
+    assert sc.GetOutputPort("payload_mass").Eval(sc_context)[0] == 0.0  # nothing adopted yet
+    simulator.AdvanceTo(3.0)
+
+    assert sc.GetOutputPort("payload_mode").Eval(sc_context)[0] == coordination.OBSERVE
+    events = sc.GetOutputPort("payload_events").Eval(sc_context)
+    assert [e.kind for e in events].count(coordination.CONVERGED) == 1
+    assert sc.GetOutputPort("payload_mass").Eval(sc_context)[0] == pytest.approx(MASS, rel=0.01)
+    np.testing.assert_allclose(sc.GetOutputPort("p_KCm").Eval(sc_context), P_KCM, atol=3e-3)
+    # The hand pose is the plant's forward kinematics at the last posture.
+    plant_context = plant.CreateDefaultContext()
+    plant.SetPositions(plant_context, postures[-1])
+    X_WH = sc.GetOutputPort("X_WH_used").Eval(sc_context)
+    assert X_WH.IsNearlyEqualTo(hand.CalcPoseInWorld(plant_context), 1e-12)
+    assert not X_WH.IsNearlyEqualTo(RigidTransform(), 1e-3)
+    # No texture, no features: the hand-eye loop runs but has nothing to adopt.
+    assert sc.GetOutputPort("hand_eye_mode").Eval(sc_context)[0] == coordination.IDENTIFY
+    assert sc.GetOutputPort("X_WC").Eval(sc_context).IsExactlyIdentity()
+    # The payload's state machine asked the motion to pause once (after its convergence).
+    assert sc.GetOutputPort("payload_pause").Eval(sc_context)[0] == 1
+
+
+def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
+    info = CameraInfo(160, 120, 1.0)
+    diagram = make_sustainable_coordination(info, 6)
+    names = {diagram.get_input_port(i).get_name() for i in range(diagram.num_input_ports())}
+    assert names == {"color_image", "depth_image", "image_time", "joint_positions", "joint_velocities",
+                     "X_WH", "wrench"}  # fmt: skip
+    assert diagram.GetInputPort("joint_positions").size() == 6
+    assert not diagram.HasOutputPort("touch")  # no held shape, no touch estimator
+    context = diagram.CreateDefaultContext()
+    X_WH = RigidTransform([0.1, 0.2, 0.3])
+    diagram.GetInputPort("X_WH").FixValue(context, X_WH)
+    assert diagram.GetOutputPort("X_WK_used").Eval(context).IsExactlyEqualTo(X_WH)
+    with pytest.raises(ValueError, match="3 positions for num_joints = 6"):
+        make_sustainable_coordination(info, 6, plant=three_joint_arm(),
+                                      hand_frame=three_joint_arm().world_frame())  # fmt: skip
