@@ -5,6 +5,7 @@ payload)."""
 import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
+from pydrake.geometry import Box
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import FixedOffsetFrame, RevoluteJoint, SpatialInertia, UnitInertia
@@ -41,9 +42,11 @@ class ScriptedArm(LeafSystem):
     """Stops at one posture after another (``period`` s each); outputs the joint positions and
     the wrench of the payload at rest, from the test's own forward kinematics."""
 
-    def __init__(self, plant, postures, period):
+    def __init__(self, plant, postures, period, push_time=np.inf, p_KP=(0, 0, 0), f_env_K=(0, 0, 0)):
         super().__init__()
         self._plant, self._postures, self._period = plant, np.asarray(postures), period
+        # From push_time on, the environment pushes the held object at p_KP with f_env_K.
+        self._push = (push_time, np.asarray(p_KP), np.asarray(f_env_K))
         self.DeclareVectorOutputPort("q", plant.num_positions(), lambda c, o: o.SetFromVector(self._q(c)))
         self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
 
@@ -60,7 +63,29 @@ class ScriptedArm(LeafSystem):
         # of the observation rule vanish.
         rng = np.random.default_rng(round(context.get_time() * 1e4))
         noise = rng.normal(size=6) * ([0.02] * 3 + [0.1] * 3)
-        output.SetFromVector(np.concatenate([np.cross(P_KCM, f_K), f_K]) + noise)
+        tau_K = np.cross(P_KCM, f_K)
+        push_time, p_KP, f_env_K = self._push
+        if context.get_time() >= push_time:  # the wrist balances the push too
+            f_K, tau_K = f_K - f_env_K, tau_K - np.cross(p_KP, f_env_K)
+        output.SetFromVector(np.concatenate([tau_K, f_K]) + noise)
+
+
+def _arm_with_coordination(plant, postures, info, arm_kwargs=None, **kwargs):
+    """The diagram under test fed by ``ScriptedArm``, still joints and textureless images."""
+    coordination_diagram = make_sustainable_coordination(
+        info, plant.num_positions(), plant=plant, hand_frame=plant.GetBodyByName("link3").body_frame(),
+        **kwargs)  # fmt: skip
+    builder = DiagramBuilder()
+    sc = builder.AddSystem(coordination_diagram)
+    arm = builder.AddSystem(ScriptedArm(plant, postures, 0.25, **(arm_kwargs or {})))
+    color, depth = _images(builder, info)
+    builder.Connect(color.get_output_port(), sc.GetInputPort("color_image"))
+    builder.Connect(depth.get_output_port(), sc.GetInputPort("depth_image"))
+    builder.Connect(arm.GetOutputPort("q"), sc.GetInputPort("joint_positions"))
+    builder.Connect(arm.GetOutputPort("wrench"), sc.GetInputPort("wrench"))
+    still = builder.AddSystem(ConstantVectorSource(np.zeros(plant.num_positions())))
+    builder.Connect(still.get_output_port(), sc.GetInputPort("joint_velocities"))
+    return sc, Simulator(builder.Build())
 
 
 def _images(builder, info):
@@ -75,22 +100,10 @@ def test_identifies_the_payload_of_a_three_joint_arm_from_its_plant():
     plant = three_joint_arm()
     hand = plant.GetBodyByName("link3").body_frame()
     info = CameraInfo(160, 120, 1.0)
-    coordination_diagram = make_sustainable_coordination(info, 3, plant=plant, hand_frame=hand)
-    assert not coordination_diagram.HasInputPort("X_WH")
     rng = np.random.default_rng(3)
     postures = rng.uniform(-1.2, 1.2, size=(12, 3))
-    builder = DiagramBuilder()
-    sc = builder.AddSystem(coordination_diagram)
-    arm = builder.AddSystem(ScriptedArm(plant, postures, 0.25))
-    color, depth = _images(builder, info)
-    builder.Connect(color.get_output_port(), sc.GetInputPort("color_image"))
-    builder.Connect(depth.get_output_port(), sc.GetInputPort("depth_image"))
-    builder.Connect(arm.GetOutputPort("q"), sc.GetInputPort("joint_positions"))
-    builder.Connect(arm.GetOutputPort("wrench"), sc.GetInputPort("wrench"))
-    still = builder.AddSystem(ConstantVectorSource(np.zeros(3)))
-    builder.Connect(still.get_output_port(), sc.GetInputPort("joint_velocities"))
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
+    sc, simulator = _arm_with_coordination(plant, postures, info)
+    assert not sc.HasInputPort("X_WH")
     context = simulator.get_mutable_context()
     sc_context = sc.GetMyContextFromRoot(context)
     assert sc.GetOutputPort("payload_mode").Eval(sc_context)[0] == coordination.IDENTIFY
@@ -113,6 +126,27 @@ def test_identifies_the_payload_of_a_three_joint_arm_from_its_plant():
     assert sc.GetOutputPort("X_WC").Eval(sc_context).IsExactlyIdentity()
     # The payload's state machine asked the motion to pause once (after its convergence).
     assert sc.GetOutputPort("payload_pause").Eval(sc_context)[0] == 1
+
+
+def test_touch_on_the_held_object_after_the_payload_is_adopted():
+    plant = three_joint_arm()
+    info = CameraInfo(160, 120, 1.0)
+    postures = np.random.default_rng(3).uniform(-1.2, 1.2, size=(12, 3))
+    # A 0.2 m long box held below the sensor; at 3.2 s its tip is pushed towards the hand with 8 N.
+    p_KP, f_env_K = np.array([0.0, 0.0, 0.2]), np.array([0.0, 0.0, -8.0])
+    sc, simulator = _arm_with_coordination(
+        plant, postures, info, arm_kwargs=dict(push_time=3.2, p_KP=p_KP, f_env_K=f_env_K),
+        held_shape=Box(0.04, 0.04, 0.2), X_KG=RigidTransform([0.0, 0.0, 0.1]))  # fmt: skip
+    sc_context = sc.GetMyContextFromRoot(simulator.get_mutable_context())
+    simulator.AdvanceTo(3.15)
+    assert sc.GetOutputPort("payload_mode").Eval(sc_context)[0] == coordination.OBSERVE
+    assert sc.GetOutputPort("touch").Eval(sc_context)[0] == 0.0
+    simulator.AdvanceTo(3.3)
+    assert sc.GetOutputPort("touch").Eval(sc_context)[0] == 1.0
+    X_WK = sc.GetOutputPort("X_WK_used").Eval(sc_context)
+    np.testing.assert_allclose(sc.GetOutputPort("p_WP").Eval(sc_context), X_WK @ p_KP, atol=0.01)
+    f_env_W = sc.GetOutputPort("f_env_W").Eval(sc_context)
+    np.testing.assert_allclose(f_env_W, X_WK.rotation() @ f_env_K, atol=0.5)
 
 
 def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
