@@ -38,6 +38,21 @@ def three_joint_arm() -> MultibodyPlant:
     return plant
 
 
+def payload_wrench(plant, q) -> np.ndarray:
+    """``[tau_K; f_K]`` of the wrist (link3) holding the payload at rest at posture ``q``."""
+    plant_context = plant.CreateDefaultContext()
+    plant.SetPositions(plant_context, q)
+    R_WK = plant.GetBodyByName("link3").EvalPoseInWorld(plant_context).rotation().matrix()
+    f_K = R_WK.T @ (-MASS * G_W)  # the wrist holds the payload up
+    return np.concatenate([np.cross(P_KCM, f_K), f_K])
+
+
+def sensor_noise(t: float) -> np.ndarray:
+    """A real sensor's noise (0.02 N m, 0.1 N), reproducible: noise-free data would make the
+    allowable error of the observation rule vanish."""
+    return np.random.default_rng(round(t * 1e4)).normal(size=6) * ([0.02] * 3 + [0.1] * 3)
+
+
 class ScriptedArm(LeafSystem):
     """Stops at one posture after another (``period`` s each); outputs the joint positions and
     the wrench of the payload at rest, from the test's own forward kinematics."""
@@ -55,19 +70,11 @@ class ScriptedArm(LeafSystem):
         return self._postures[k]
 
     def _calc_wrench(self, context, output):
-        plant_context = self._plant.CreateDefaultContext()
-        self._plant.SetPositions(plant_context, self._q(context))
-        R_WK = self._plant.GetBodyByName("link3").EvalPoseInWorld(plant_context).rotation().matrix()
-        f_K = R_WK.T @ (-MASS * G_W)  # the wrist holds the payload up
-        # A real sensor's noise (0.02 N m, 0.1 N): noise-free data would make the allowable error
-        # of the observation rule vanish.
-        rng = np.random.default_rng(round(context.get_time() * 1e4))
-        noise = rng.normal(size=6) * ([0.02] * 3 + [0.1] * 3)
-        tau_K = np.cross(P_KCM, f_K)
+        tau_K, f_K = np.split(payload_wrench(self._plant, self._q(context)), 2)
         push_time, p_KP, f_env_K = self._push
         if context.get_time() >= push_time:  # the wrist balances the push too
             f_K, tau_K = f_K - f_env_K, tau_K - np.cross(p_KP, f_env_K)
-        output.SetFromVector(np.concatenate([tau_K, f_K]) + noise)
+        output.SetFromVector(np.concatenate([tau_K, f_K]) + sensor_noise(context.get_time()))
 
 
 def _arm_with_coordination(plant, postures, info, arm_kwargs=None, **kwargs):
