@@ -7,6 +7,7 @@ import pytest
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import FixedOffsetFrame, RevoluteJoint, SpatialInertia, UnitInertia
 from pydrake.systems.analysis import Simulator
@@ -16,6 +17,7 @@ from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
 
 from sustain_drake.identification import coordination
 from sustain_drake.sustainable_coordination import make_sustainable_coordination
+from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
 
 MASS, P_KCM = 0.8, np.array([0.02, -0.01, 0.09])  # the held payload, kg and m in K
 G_W = np.array([0.0, 0.0, -9.81])
@@ -171,3 +173,29 @@ def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
     with pytest.raises(ValueError, match="3 positions for num_joints = 6"):
         make_sustainable_coordination(info, 6, plant=three_joint_arm(),
                                       hand_frame=three_joint_arm().world_frame())  # fmt: skip
+
+
+def test_hand_pose_from_a_plant_with_other_bodies_reads_the_arm_instance_only():
+    plant = MultibodyPlant(0.0)
+    arm = Parser(plant).AddModelsFromUrl("package://drake/examples/acrobot/Acrobot.sdf")[0]
+    plant.AddRigidBody("loose_box", plant.AddModelInstance("objects"),
+                       SpatialInertia(1.0, np.zeros(3), UnitInertia.SolidBox(0.1, 0.1, 0.1)))  # fmt: skip
+    plant.Finalize()
+    assert plant.num_positions() == 9  # the arm's 2 and a free body's 7
+    sensor = plant.GetBodyByName("upper_link").body_frame()
+    fk = HandPoseFromPlant(plant, plant.GetBodyByName("lower_link").body_frame(), sensor, model_instance=arm)
+    assert fk.get_input_port().size() == 2
+    context = fk.CreateDefaultContext()
+    q = np.array([0.4, -0.9])
+    fk.get_input_port().FixValue(context, q)
+    plant_context = plant.CreateDefaultContext()
+    plant.SetPositions(plant_context, arm, q)
+    expected = plant.GetBodyByName("lower_link").EvalPoseInWorld(plant_context)
+    assert fk.GetOutputPort("X_WH").Eval(context).IsNearlyEqualTo(expected, 1e-12)
+    assert fk.GetOutputPort("X_WK").Eval(context).IsNearlyEqualTo(
+        plant.GetBodyByName("upper_link").EvalPoseInWorld(plant_context), 1e-12)
+    # A new input is a new pose (the cached plant context follows it).
+    fk.get_input_port().FixValue(context, np.zeros(2))
+    assert not fk.GetOutputPort("X_WH").Eval(context).IsNearlyEqualTo(expected, 1e-6)
+    with pytest.raises(ValueError, match="finalized"):
+        HandPoseFromPlant(MultibodyPlant(0.0), plant.world_frame())
