@@ -243,6 +243,9 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     kinesthetic = kinesthetic or KinestheticConfig()
     if plant is not None and hand_frame is None:
         raise ValueError("make_sustainable_coordination: a plant needs its hand_frame")
+    if plant is None and not (hand_frame is None and sensor_frame is None and model_instance is None):
+        raise ValueError("make_sustainable_coordination: hand_frame, sensor_frame and model_instance "
+                         "need a plant")  # fmt: skip
     builder = DiagramBuilder()
     vision = add_hand_eye_loop(builder, camera_info, num_joints, fps, hand_eye, body_detection)
     touch = add_payload_loop(builder, num_joints, kinesthetic, held_shape, X_KG)

@@ -170,6 +170,8 @@ def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
     X_WH = RigidTransform([0.1, 0.2, 0.3])
     diagram.GetInputPort("X_WH").FixValue(context, X_WH)
     assert diagram.GetOutputPort("X_WK_used").Eval(context).IsExactlyEqualTo(X_WH)
+    with pytest.raises(ValueError, match="need a plant"):
+        make_sustainable_coordination(info, 6, hand_frame=three_joint_arm().world_frame())
     with pytest.raises(ValueError, match="3 positions for num_joints = 6"):
         make_sustainable_coordination(info, 6, plant=three_joint_arm(),
                                       hand_frame=three_joint_arm().world_frame())  # fmt: skip
