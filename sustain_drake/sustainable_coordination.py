@@ -85,12 +85,20 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     builder.Connect(tracker.GetOutputPort("tracked_features"), detector.GetInputPort("tracked_features"))
     builder.Connect(tracker.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
     builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
-    builder.Connect(candidates.GetOutputPort("solution"), machine.GetInputPort("solution"))
-    builder.Connect(candidates.GetOutputPort("observation"), machine.GetInputPort("observation"))
-    builder.Connect(machine.GetOutputPort("adopted_x"), candidates.GetInputPort("reference_x"))
-    builder.Connect(machine.GetOutputPort("reset"), candidates.GetInputPort("reset"))
+    connect_identify_observe(builder, candidates, machine)
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     return HandEyeLoop(tracker, detector, candidates, machine)
+
+
+def connect_identify_observe(builder, identifier, machine) -> None:
+    """Closes the identify <-> observe loop (§3.1, §4.3) between an identifier system
+    (``SustainableIdentifierSystem`` or ``CandidateIdentifiers``) and a
+    ``CoordinationStateMachine``: the solution and each sample's error go to the machine; the
+    adopted estimate (under which the errors are computed) and the reset count come back."""
+    builder.Connect(identifier.GetOutputPort("solution"), machine.GetInputPort("solution"))
+    builder.Connect(identifier.GetOutputPort("observation"), machine.GetInputPort("observation"))
+    builder.Connect(machine.GetOutputPort("adopted_x"), identifier.GetInputPort("reference_x"))
+    builder.Connect(machine.GetOutputPort("reset"), identifier.GetInputPort("reset"))
 
 
 def add_payload_loop(builder, num_joints: int, config: KinestheticConfig, shape=None,
@@ -119,10 +127,7 @@ def add_payload_loop(builder, num_joints: int, config: KinestheticConfig, shape=
         builder.Connect(sm.GetOutputPort("adopted_solution"), estimator.GetInputPort("payload"))
         builder.Connect(sm.GetOutputPort("allowable_error"), estimator.GetInputPort("allowable_error"))
     builder.Connect(gate.GetOutputPort("sample_valid"), ident.GetInputPort("sample_valid"))
-    builder.Connect(ident.GetOutputPort("solution"), sm.GetInputPort("solution"))
-    builder.Connect(ident.GetOutputPort("observation"), sm.GetInputPort("observation"))
-    builder.Connect(sm.GetOutputPort("adopted_x"), ident.GetInputPort("reference_x"))
-    builder.Connect(sm.GetOutputPort("reset"), ident.GetInputPort("reset"))
+    connect_identify_observe(builder, ident, sm)
     return PayloadLoop(ident, sm, gate, estimator)
 
 
