@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import coordination
 from sustain_drake.identification.coordination import CoordinationRule
+from sustain_drake.sustainable_coordination import connect_identify_observe
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.sustainable_identifier_system import (
     EyeToHandFormulation,
@@ -111,10 +112,7 @@ def build(t_slip, period=0.1):
     sm = builder.AddSystem(CoordinationStateMachine(16, period=period))
     builder.Connect(source.GetOutputPort("p_CP"), ident.GetInputPort("p_CP"))
     builder.Connect(source.GetOutputPort("X_WH"), ident.GetInputPort("X_WH"))
-    builder.Connect(ident.GetOutputPort("solution"), sm.GetInputPort("solution"))
-    builder.Connect(ident.GetOutputPort("observation"), sm.GetInputPort("observation"))
-    builder.Connect(sm.GetOutputPort("adopted_x"), ident.GetInputPort("reference_x"))
-    builder.Connect(sm.GetOutputPort("reset"), ident.GetInputPort("reset"))
+    connect_identify_observe(builder, ident, sm)
     diagram = builder.Build()
     return truth, diagram, ident, sm
 

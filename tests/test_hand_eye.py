@@ -21,6 +21,7 @@ from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.station import build_station, load_scenario
 from sustain_drake.station.scenario import HeadMove, ToolSlip
+from sustain_drake.sustainable_coordination import connect_identify_observe
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
@@ -80,10 +81,7 @@ def test_scripted_tool_point_on_the_station_detects_a_slip_and_a_head_move():
     builder.Connect(source.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
     builder.Connect(source.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
-    builder.Connect(candidates.GetOutputPort("solution"), machine.GetInputPort("solution"))
-    builder.Connect(candidates.GetOutputPort("observation"), machine.GetInputPort("observation"))
-    builder.Connect(machine.GetOutputPort("adopted_x"), candidates.GetInputPort("reference_x"))
-    builder.Connect(machine.GetOutputPort("reset"), candidates.GetInputPort("reset"))
+    connect_identify_observe(builder, candidates, machine)
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     simulator = Simulator(builder.Build())

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -35,6 +36,7 @@ from sustain_drake.identification.sustainable_identifier import (
     EigenSolution,
     FormulationIdentifier,
     IdentificationError,
+    SolutionProperties,
     Verdict,
     judge,
 )
@@ -83,7 +85,7 @@ class EyeToHandEstimate:
 
 
 @dataclass(frozen=True, slots=True)
-class EyeToHandSolution:
+class EyeToHandSolution(SolutionProperties):
     """Everything one solve gives.
 
     Attributes:
@@ -96,6 +98,8 @@ class EyeToHandSolution:
         verdict: the convergence verdict from all three criteria.
         num_samples: samples behind this solution.
     """
+
+    num_unknowns: ClassVar[int] = N_UNKNOWNS
 
     eigen: EigenSolution | None
     scale: float
@@ -110,14 +114,6 @@ class EyeToHandSolution:
     def estimate(self) -> EyeToHandEstimate | None:
         """The best estimate available: the refined one if computed, else the projected one."""
         return self.refined if self.refined is not None else self.projected
-
-    @property
-    def eigenvalues(self) -> np.ndarray:
-        return self.eigen.eigenvalues if self.eigen is not None else np.zeros(N_UNKNOWNS)
-
-    @property
-    def expected_rms(self) -> float:
-        return math.sqrt(max(self.expected_mse, 0.0))
 
     @property
     def x(self) -> np.ndarray:

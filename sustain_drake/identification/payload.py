@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -35,6 +36,7 @@ from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     EigenSolution,
     FormulationIdentifier,
+    SolutionProperties,
     SustainableIdentifier,
     Verdict,
     judge,
@@ -64,7 +66,7 @@ def build_A(wrench_K: np.ndarray, R_WK: np.ndarray, g_W: np.ndarray, out=None) -
 
 
 @dataclass(frozen=True, slots=True)
-class PayloadSolution:
+class PayloadSolution(SolutionProperties):
     """Everything one solve gives.
 
     Attributes:
@@ -77,6 +79,8 @@ class PayloadSolution:
         num_samples: samples behind this solution.
     """
 
+    num_unknowns: ClassVar[int] = N_UNKNOWNS
+
     eigen: EigenSolution | None
     mass: float
     p_KCm: np.ndarray
@@ -84,14 +88,6 @@ class PayloadSolution:
     expected_mse: float
     verdict: Verdict
     num_samples: int
-
-    @property
-    def eigenvalues(self) -> np.ndarray:
-        return self.eigen.eigenvalues if self.eigen is not None else np.zeros(N_UNKNOWNS)
-
-    @property
-    def expected_rms(self) -> float:
-        return math.sqrt(max(self.expected_mse, 0.0))
 
     @property
     def ssd(self) -> float:

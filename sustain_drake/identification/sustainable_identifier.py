@@ -339,3 +339,21 @@ class FormulationIdentifier:
 
     def reset(self) -> None:
         self._core.reset()
+
+
+class SolutionProperties:
+    """Properties shared by the formulations' solution dataclasses, which have the fields
+    ``eigen`` (``EigenSolution`` or None) and ``expected_mse``, and a class constant
+    ``num_unknowns``."""
+
+    __slots__ = ()
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """``lambda_1 >= ... >= lambda_N`` (zeros before any sample)."""
+        return self.eigen.eigenvalues if self.eigen is not None else np.zeros(self.num_unknowns)
+
+    @property
+    def expected_rms(self) -> float:
+        """``sqrt(a^2 lambda_N)``, the identification's own per-sample RMS error prediction."""
+        return math.sqrt(max(self.expected_mse, 0.0))
