@@ -188,3 +188,49 @@ def test_bad_inputs_raise_value_errors():
         PinholeIntrinsics(W, H, fx=0.0, fy=1.0, cx=0.0, cy=0.0)
     with pytest.raises(ValueError, match="grid"):
         CellGrid(4, 4, rows=8, cols=8)
+
+
+def test_identity_check_ends_a_track_whose_patch_becomes_another_texture():
+    # The same scene one frame later, except that a patch around one feature now shows another
+    # texture at the same place (a person passing an arm corner). Where LK with the
+    # forward-backward check still keeps the track (it converges to a look-alike spot of the
+    # new texture), the appearance test ends it.
+    img = texture(0)
+    s0 = start(img)
+    noise = np.random.default_rng(5).uniform(0, 255, (H, W)).astype(np.float32)
+    other = np.clip(cv2.GaussianBlur(noise, (0, 0), 1.0) * 2 - 128, 10, 245).astype(np.uint8)
+    lk_only = TrackerParams(ncc_min=0.0)
+    kept_by_lk = ended = 0
+    for victim in np.flatnonzero(interior(s0.features.p_px, 80))[:40]:
+        u, v = np.rint(s0.features.p_px[victim]).astype(int)
+        nxt = img.copy()
+        nxt[v - 12:v + 13, u - 12:u + 13] = other[v - 12:v + 13, u - 12:u + 13]
+        if s0.ids[victim] not in track_frame(s0, rgba(nxt), None, DT, K, GRID, lk_only).ids:
+            continue
+        kept_by_lk += 1
+        s1 = track_frame(s0, rgba(nxt), None, DT, K, GRID)
+        ended += s0.ids[victim] not in s1.ids
+        # Features away from the replaced patch keep their tracks.
+        far = (np.linalg.norm(s0.features.p_px - [u, v], axis=1) > 40) & interior(s0.features.p_px)
+        assert np.isin(s0.ids[far], s1.ids).mean() > 0.98
+    assert kept_by_lk >= 5
+    assert ended >= 0.8 * kept_by_lk
+    # The same texture moved by a sub-pixel shift ends no track.
+    assert track_frame(s0, rgba(shifted(img, 1.3, -0.7)), None, DT, K, GRID).identity_drops == 0
+
+
+def test_identity_check_ends_a_track_whose_depth_jumps():
+    img = texture(0)
+    d0 = depth_plane(1.0)
+    s0 = start(img, depth=d0)
+    u, v = np.rint(s0.features.p_px[np.flatnonzero(interior(s0.features.p_px, 80))[0]]).astype(int)
+    d1 = d0.copy()
+    d1[v - 12:v + 13, u - 12:u + 13] = 2.5       # the surface there is now 1.5 m farther
+    s1 = track_frame(s0, rgba(img), d1, DT, K, GRID)
+    gone = np.setdiff1d(s0.ids, s1.ids)
+    moved = s0.features.p_px[np.isin(s0.ids, gone)]
+    assert gone.size >= 1 and s1.identity_drops == gone.size
+    assert np.all(np.abs(moved - [u, v]).max(axis=1) <= 13)
+    # Depth noise of a few mm never ends a track.
+    noisy = d0 + np.random.default_rng(1).normal(0, 0.005, d0.shape).astype(np.float32)
+    assert track_frame(s0, rgba(img), noisy, DT, K, GRID).identity_drops == 0

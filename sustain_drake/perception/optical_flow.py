@@ -12,6 +12,22 @@ Per frame, :func:`track_frame` turns the previous :class:`TrackerState` and a ne
 
 Frames that carry no information (empty 0x0, black, or not newer than the last one) are skipped:
 the state, and so every track's history, is returned unchanged.
+
+**Track identity.** A track must stay on one physical point: body detection carries a confirmed
+feature's evidence wherever its track goes, and the hand-eye identifier takes its 3-D points as
+one point on the hand. Lucas–Kanade with the forward–backward check still lets a track slide
+onto another surface when something passes it (a person walking past an arm corner pulls the
+window along). Two cheap tests end such a track (:func:`identity_kept`):
+
+- *appearance*: the normalised cross-correlation (NCC) of the ``ncc_patch_px`` square patch
+  around the feature in the previous frame and around its new position (bilinear, one
+  ``cv2.remap`` for all features) must be at least ``ncc_min``; a patch that became another
+  texture correlates poorly, whereas the same surface seen one frame later (a small rotation,
+  shading) keeps NCC near 1. Patches with no texture in both frames (std below ``ncc_flat``
+  gray levels) pass: NCC says nothing there.
+- *depth*: where the depth is valid in both frames, the feature's depth must not jump by more
+  than ``depth_jump_m`` between frames (the arm moves a few cm per frame; another surface
+  behind or in front of it is usually tens of cm away).
 """
 
 from __future__ import annotations
@@ -98,6 +114,12 @@ class TrackerParams:
     min_flow_px: float = 0.2        # per-frame flow below this counts as 0 (LK noise on still
     #                                 texture would otherwise keep ṡ_j from ever "rising from 0")
     black_level: int = 8            # a frame whose brightest gray pixel is below this is skipped
+    # Track identity (module docstring): a track that changed surface ends.
+    ncc_min: float = 0.8            # frame-to-frame NCC of the feature's patch at least this;
+    #                                 0 or less: no appearance test
+    ncc_patch_px: int = 9           # side of the square patch (odd)
+    ncc_flat: float = 2.0           # gray-level std below which a patch has no texture
+    depth_jump_m: float = 0.1       # depth change per frame above this ends the track; inf: no test
 
     def __post_init__(self):
         if self.max_corners <= 0 or not 0.0 < self.reseed_fraction <= 1.0:
@@ -106,6 +128,10 @@ class TrackerParams:
             raise ValueError(f"invalid Lucas–Kanade settings in {self}")
         if self.min_flow_px < 0:
             raise ValueError(f"min_flow_px must be >= 0, got {self.min_flow_px}")
+        if not (self.ncc_min <= 1.0 and self.ncc_patch_px >= 3 and self.ncc_patch_px % 2 == 1
+                and self.ncc_flat >= 0 and self.depth_jump_m > 0):
+            raise ValueError(f"invalid track identity settings (ncc_min <= 1, odd ncc_patch_px "
+                             f">= 3, ncc_flat >= 0, depth_jump_m > 0) in {self}")
 
 
 @dataclass
@@ -158,6 +184,7 @@ class TrackerState:
     last_time: float = -np.inf
     frames: int = 0                 # processed frames
     skipped: int = 0                # skipped frames (empty, black, stale)
+    identity_drops: int = 0         # tracks ended by the identity tests (appearance, depth)
     sdot: np.ndarray = field(default_factory=lambda: np.zeros(0))
     features: TrackedFeatures = field(default_factory=TrackedFeatures)
 
@@ -169,7 +196,8 @@ class TrackerState:
         return TrackerState(
             prev_gray=self.prev_gray.copy(), ids=self.ids.copy(), p_px=self.p_px.copy(),
             next_id=self.next_id, last_time=self.last_time, frames=self.frames,
-            skipped=self.skipped, sdot=self.sdot.copy(), features=self.features.copy())
+            skipped=self.skipped, identity_drops=self.identity_drops, sdot=self.sdot.copy(),
+            features=self.features.copy())
 
     def __deepcopy__(self, memo):
         return self.copy()
@@ -270,6 +298,52 @@ def _lk(prev_gray: np.ndarray, next_gray: np.ndarray, pts: np.ndarray, params: T
     return out.reshape(-1, 2), status.reshape(-1).astype(bool)
 
 
+def _patches(gray: np.ndarray, p_px: np.ndarray, size: int) -> np.ndarray:
+    """K x size x size float32 patches of ``gray`` centred on ``p_px`` (bilinear, borders
+    replicated), sampled by one ``cv2.remap`` call for all features."""
+    k = p_px.shape[0]
+    r = (size - 1) / 2.0
+    offs = np.arange(size, dtype=np.float32) - np.float32(r)
+    map_x = (p_px[:, 0, None, None].astype(np.float32) + offs[None, None, :]).repeat(size, axis=1)
+    map_y = (p_px[:, 1, None, None].astype(np.float32) + offs[None, :, None]).repeat(size, axis=2)
+    out = cv2.remap(gray, map_x.reshape(k * size, size), map_y.reshape(k * size, size),
+                    cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(k, size, size).astype(np.float32)
+
+
+def patch_ncc(a: np.ndarray, b: np.ndarray, flat: float) -> np.ndarray:
+    """Normalised cross-correlation of patch pairs (K x n x n each): 1 for the same texture,
+    about 0 for unrelated ones. Two flat patches (std below ``flat``) give 1, one flat and one
+    textured 0."""
+    a = a.reshape(a.shape[0], -1)
+    b = b.reshape(b.shape[0], -1)
+    a = a - a.mean(axis=1, keepdims=True)
+    b = b - b.mean(axis=1, keepdims=True)
+    sa = np.sqrt(np.mean(a * a, axis=1))
+    sb = np.sqrt(np.mean(b * b, axis=1))
+    ncc = np.mean(a * b, axis=1) / np.maximum(sa * sb, 1e-12)
+    flat_a, flat_b = sa < flat, sb < flat
+    return np.where(flat_a & flat_b, 1.0, np.where(flat_a | flat_b, 0.0, ncc))
+
+
+def identity_kept(prev_gray: np.ndarray, gray: np.ndarray, p0: np.ndarray, p1: np.ndarray,
+                  z0: np.ndarray, z1: np.ndarray, params: TrackerParams) -> np.ndarray:
+    """Bool per feature: its track still shows the same surface (module docstring, *track
+    identity*): NCC of its patches at ``p0`` in ``prev_gray`` and at ``p1`` in ``gray`` at least
+    ``ncc_min``, and depth ``z0`` -> ``z1`` (m; NaN where invalid: no test) changed by at most
+    ``depth_jump_m``."""
+    keep = np.ones(p0.shape[0], bool)
+    if p0.shape[0] == 0:
+        return keep
+    if params.ncc_min > 0:
+        ncc = patch_ncc(_patches(prev_gray, p0, params.ncc_patch_px),
+                        _patches(gray, p1, params.ncc_patch_px), params.ncc_flat)
+        keep &= ncc >= params.ncc_min
+    with np.errstate(invalid="ignore"):
+        keep &= ~(np.abs(z1 - z0) > params.depth_jump_m)
+    return keep
+
+
 def track_frame(state: TrackerState, image: np.ndarray, depth: np.ndarray | None,
                 time: float, intrinsics: PinholeIntrinsics, grid: CellGrid,
                 params: TrackerParams = TrackerParams()) -> TrackerState:
@@ -306,6 +380,17 @@ def track_frame(state: TrackerState, image: np.ndarray, depth: np.ndarray | None
         h, w = gray.shape
         inside = (p1[:, 0] >= 0) & (p1[:, 0] <= w - 1) & (p1[:, 1] >= 0) & (p1[:, 1] <= h - 1)
         keep = ok_f & ok_b & inside & np.isfinite(p1).all(axis=1) & (fb < params.fb_threshold_px)
+        # Track identity: the same surface in both frames, by appearance and by depth.
+        prev = state.features
+        z0 = np.full(p0.shape[0], np.nan)
+        if len(prev) == p0.shape[0]:    # the previous frame's features, in the tracks' order
+            z0 = np.where(prev.valid, prev.p_CP[:, 2], np.nan)
+        p1_CP, valid1 = back_project(np.where(keep[:, None], p1, 0.0), depth, intrinsics)
+        z1 = np.where(valid1, p1_CP[:, 2], np.nan)
+        same = identity_kept(state.prev_gray, gray, p0[keep], p1[keep], z0[keep], z1[keep],
+                             params)
+        new.identity_drops += int(np.sum(~same))
+        keep[np.flatnonzero(keep)[~same]] = False
         ids, pts, flow = state.ids[keep], p1[keep], (p1 - p0)[keep].astype(float)
         dt = time - state.last_time
         sdot = cell_visual_change(grid, pts, flow, dt, params.min_flow_px)

@@ -63,6 +63,11 @@ class OpticalFlowTracker(LeafSystem):
       (id, pixel, flow in pixels since the previous frame, ``p_CP`` in metres in the camera
       frame C, ``valid`` for depth, cell index).
 
+    A track ends when it no longer shows the same surface (``TrackerParams.ncc_min``,
+    ``depth_jump_m``: its patch's appearance or its depth changed between frames; see
+    :mod:`sustain_drake.perception.optical_flow`), so a feature's id and ``p_CP`` stay on one
+    physical point when something passes it.
+
     The camera intrinsics are a constructor argument (a ``CameraInfo``): they are fixed for a
     camera, and the image size fixes the grid and so the size of ``visual_change``. Skipped
     frames leave the state untouched, so the outputs hold their last values.
