@@ -32,8 +32,43 @@ def checker(width: int, height: int, cols: int, rows: int, colors) -> np.ndarray
     return img
 
 
-def box_obj(name: str, size, center=(0.0, 0.0, 0.0)) -> str:
-    """An OBJ box whose every face maps the whole texture (u along the first in-face axis)."""
+# The rod (hand_eye.yaml): 50 mm square, 0.3 m long. Each side face is black with yellow squares
+# of 0.6 times the face's width (30 mm, ~11 px at 320x240 and 0.75 m) on its centre line, one every
+# 60 mm along the rod, so that every image corner on it is the corner of a square: a point fixed on
+# the rod's surface, 10 mm inside the face's edges. The long edges are plain black (a silhouette against the background is a
+# straight edge, no corner), and so are the rod's ends. A 25 mm checker bar (the first version) was
+# ~7 px wide at 320x240: its corners were silhouette corners that slid along the bar and onto the
+# background, and the depth there mixed rod and background (bench/bench_hand_eye_candidates.py).
+ROD_WIDTH = 0.050  # m
+ROD_LENGTH = 0.300  # m
+ROD_TEXEL = 0.0005  # m per texture pixel
+ROD_MARGIN = 0.007  # m
+ROD_CELL = 0.018  # m across
+ROD_ROW = 0.025  # m along
+
+
+def rod_texture(light, dark) -> np.ndarray:
+    """One side face of the rod (u across, v along it): a two-column checker of ROD_CELL cells
+    between plain dark margins of ROD_MARGIN."""
+    width, height = round(ROD_WIDTH / ROD_TEXEL), round(ROD_LENGTH / ROD_TEXEL)
+    img = np.empty((height, width, 3), np.uint8)
+    img[:] = dark
+    margin, cell = round(ROD_MARGIN / ROD_TEXEL), round(ROD_CELL / ROD_TEXEL)
+    row = round(ROD_ROW / ROD_TEXEL)
+    for r in range(height // row):
+        c = r % 2
+        u0 = margin + c * cell
+        img[r * row:(r + 1) * row, u0:u0 + cell] = light
+    return img
+
+
+def box_obj(name: str, size, center=(0.0, 0.0, 0.0), plain_axis: int | None = None,
+            plain_uv=(0.0, 0.0)) -> str:
+    """An OBJ box whose every face maps the whole texture (u along the first in-face axis).
+
+    The two faces normal to ``plain_axis`` (if given) take the single texel at ``plain_uv``
+    instead: a plain colour (the ends of a rod; squeezing the whole texture onto them would put
+    corners there)."""
     half = np.asarray(size, float) / 2
     center = np.asarray(center, float)
     v_lines, vt_lines, vn_lines, f_lines = [], [], [], []
@@ -51,6 +86,8 @@ def box_obj(name: str, size, center=(0.0, 0.0, 0.0)) -> str:
             uvs = [(0, 1), (1, 1), (1, 0), (0, 0)]
         else:
             uvs = [(0, 0), (1, 0), (1, 1), (0, 1)]
+        if n == plain_axis:
+            uvs = [plain_uv] * 4
         for p, uv in zip(corners, uvs, strict=True):
             v_lines.append("v {:.6f} {:.6f} {:.6f}".format(*p))
             vt_lines.append("vt {} {}".format(*uv))
@@ -78,8 +115,9 @@ def main() -> None:
     HERE.mkdir(exist_ok=True)
     # Rod: 0.3 m long along +z, from 0.05 m behind the grasp point to its tip at 0.25 m.
     yellow, black = (250, 210, 20), (20, 20, 20)
-    write("rod", box_obj("rod", (0.025, 0.025, 0.3), center=(0, 0, 0.1)),
-          checker(64, 768, 2, 12, (yellow, black)))
+    write("rod", box_obj("rod", (ROD_WIDTH, ROD_WIDTH, ROD_LENGTH), center=(0, 0, 0.1),
+                         plain_axis=2, plain_uv=(0.02, 0.5)),
+          rod_texture(yellow, black))
     # Box: 0.2 x 0.15 x 0.12 m, its top face at the grasp point, hanging along +z.
     white, blue = (235, 235, 235), (30, 60, 200)
     write("box", box_obj("box", (0.2, 0.15, 0.12), center=(0, 0, 0.06)),

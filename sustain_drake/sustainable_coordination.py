@@ -24,7 +24,7 @@ from pydrake.systems.sensors import LcmImageArrayToImages
 from sustain_drake.experiments.body_detection_config import BodyDetectionConfig
 from sustain_drake.experiments.hand_eye_config import HandEyeConfig
 from sustain_drake.experiments.kinesthetic_config import KinestheticConfig
-from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
+from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers, FeatureRefiner
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.ground_truth import PoseToVector
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
@@ -46,6 +46,11 @@ class HandEyeLoop:
     detector: MotionCoincidenceDetector
     candidates: CandidateIdentifiers
     state_machine: CoordinationStateMachine
+    refiner: FeatureRefiner | None = None
+
+    def image_inputs(self, name: str) -> list:
+        """The input ports that take the camera's ``name`` (color_image, depth_image, image_time)."""
+        return [s.GetInputPort(name) for s in (self.tracker, self.refiner) if s is not None]
 
 
 @dataclass
@@ -59,8 +64,9 @@ class PayloadLoop:
 def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: HandEyeConfig,
                       perception: BodyDetectionConfig) -> HandEyeLoop:  # fmt: skip
     """Adds the tracker, detector, candidate identifiers and state machine, connected to each other.
-    Left for the caller: the tracker's images, the detector's ``actuator_positions``, the
-    candidates' ``X_WH``, and the uses of ``detector.confirm`` and ``state_machine.pause``.
+    Left for the caller: the images (``HandEyeLoop.image_inputs``: the tracker's and, with
+    ``hand_eye.refine_points``, the ``FeatureRefiner``'s), the detector's ``actuator_positions``,
+    the candidates' ``X_WH``, and the uses of ``detector.confirm`` and ``state_machine.pause``.
     Raises ValueError on bad settings."""
     criteria, rule = hand_eye.coordination.criteria(), hand_eye.coordination.rule()
     candidate_params = hand_eye.candidates.params()
@@ -83,11 +89,17 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     machine.set_name("coordination_state_machine")
     builder.Connect(tracker.GetOutputPort("visual_change"), detector.GetInputPort("visual_change"))
     builder.Connect(tracker.GetOutputPort("tracked_features"), detector.GetInputPort("tracked_features"))
-    builder.Connect(tracker.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
+    features, refiner = tracker.GetOutputPort("tracked_features"), None
+    if hand_eye.refine_points:  # drift-free points for the identifiers (the detector keeps the tracks)
+        refiner = builder.AddSystem(FeatureRefiner(info, hand_eye.refinement.params()))
+        refiner.set_name("feature_refiner")
+        builder.Connect(features, refiner.GetInputPort("tracked_features"))
+        features = refiner.GetOutputPort("tracked_features")
+    builder.Connect(features, candidates.GetInputPort("tracked_features"))
     builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
     connect_identify_observe(builder, candidates, machine)
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
-    return HandEyeLoop(tracker, detector, candidates, machine)
+    return HandEyeLoop(tracker, detector, candidates, machine, refiner)
 
 
 def connect_identify_observe(builder, identifier, machine) -> None:
@@ -256,7 +268,10 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     touch = add_payload_loop(builder, num_joints, kinesthetic, held_shape, X_KG)
 
     for name in ("color_image", "depth_image", "image_time"):
-        builder.ExportInput(vision.tracker.GetInputPort(name), name)
+        first, *others = vision.image_inputs(name)
+        builder.ExportInput(first, name)
+        for port in others:
+            builder.ConnectInput(name, port)
     joint_positions = builder.ExportInput(
         vision.detector.GetInputPort("actuator_positions"), "joint_positions")  # fmt: skip
     builder.ExportInput(touch.gate.GetInputPort("joint_velocities"), "joint_velocities")

@@ -1,6 +1,7 @@
 """Candidate tracked points (paper Fig. 7): bookkeeping on scripted features with a known answer."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -326,3 +327,71 @@ def test_params_validation():
         CandidateParams(max_candidates=0)
     with pytest.raises(ValueError, match="reacquire_radius"):
         CandidateParams(reacquire_radius=float("nan"))
+
+
+def test_joint_refinement_uses_ended_tracks_of_the_hand_and_not_another_link():
+    """``joint``: at adoption the leader's camera is refined with the other points it explains,
+    including a hand point whose track ended (archived), never a point of another link."""
+    params = CandidateParams(confirm_with_witness=False, joint=True)
+    criteria = replace(CRITERIA, min_samples=200)
+    p4 = P_TOOL + [0.03, -0.02, 0.04]
+
+    def frames(k, X, rng):
+        if k >= 260:
+            return None
+        X_L, p = other_link(X, k, P_OTHER)
+        ids, points = [9, 7], [seen(X, P_TOOL, rng), seen(X_L, p, rng)]
+        if k < 120:  # point 4's track ends at frame 120 (occluded for good)
+            ids.append(4)
+            points.append(seen(X, p4, rng))
+        return ids, points, [True] * len(ids), [True] * len(ids)
+
+    bank = CandidateBank()
+    rng = np.random.default_rng(3)
+    for k in range(10_000):
+        X = hand_pose(k)
+        out = frames(k, X, rng)
+        if out is None:
+            break
+        ids, p, valid, body = out
+        bank = candidates.step(bank, params, criteria, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
+                               np.array(valid), np.array(body))
+    assert 4 in [c.feature_id for c in bank.archive]
+    assert bank.leader == 9
+    assert bank.adoptions[0].kind == "identified, camera refined with 2 points"  # 9 and 4, not 7
+    est = bank.adoptions[0].estimate
+    assert rotation_error_deg(est.R_WC, TRUTH.X_WC[:3, :3]) < 0.5
+    assert np.linalg.norm(est.p_HP - P_TOOL) < 0.005
+    # A reset empties the archive.
+    bank = candidates.step(bank, params, criteria, 300 * DT, 1.0, hand_pose(300), 300 * DT, np.array([9]),
+                           np.array([seen(hand_pose(300), P_TOOL, rng)]), np.array([True]), np.array([True]))
+    assert bank.archive == ()
+
+
+def test_observers_keep_observing_when_the_observed_point_and_witness_are_gone_and_see_a_slip():
+    """``max_observers``: hand points consistent with the adopted camera are observed besides the
+    observed point and its witness. When both are lost the observers keep giving a sample every
+    frame, and a slip (every point moves on the hand) shows in every observer."""
+    params = replace(HANDOVER, max_observers=3)
+    points = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05],
+              6: P_TOOL + [0.02, 0.05, 0.02], 8: P_TOOL + [-0.01, -0.04, 0.06]}
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+    slip = np.array([0.0, 0.0, 0.04])  # the tool moves 4 cm along H's z from frame 560
+    bank, lost, counts = CandidateBank(), set(), {}
+    rng = np.random.default_rng(3)
+    for k in range(600):
+        if k == 400:  # the observed point and its witness are lost for good
+            lost = {bank.observed, bank.witness}
+            assert len(lost - {-1}) == 2 and len({o[0] for o in bank.observers} - lost) >= 2
+        X = hand_pose(k)
+        shift = slip if k >= 560 else 0.0
+        ids = [i for i in points if i not in lost]
+        p = [seen(X, points[i] + shift, rng) for i in ids]
+        bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
+                               np.ones(len(ids), bool), np.ones(len(ids), bool), x_true, allowable_error=1e-4)
+        counts[k] = (bank.sample_count, bank.sample_error)
+    # Between the loss (400) and the slip (560): a sample every frame, within the noise.
+    assert counts[559][0] - counts[410][0] == 149
+    assert max(counts[k][1] for k in range(420, 560)) < 2e-5
+    # After the slip every remaining point is 4 cm off: the smallest s_t is about (4 cm)^2.
+    assert all(counts[k][1] > 1e-3 for k in range(562, 600))

@@ -68,7 +68,25 @@ def test_a_good_sample_clears_the_count_and_repeated_ticks_count_once():
     assert not events and state[coordination.VIOLATIONS] == 9
 
 
+def test_the_sensor_noise_floors_the_allowable_error():
+    """Near noise-free data: a^2 lambda_N is round-off (1e-20 m^2); without a floor every sample
+    would violate. With the sensor's noise (1 mm) as the floor, sigma = 100 (1 mm)^2."""
+    rule = CoordinationRule(noise_rms=1e-3)
+    state, event = coordination.step(coordination.initial_state(), rule, 0.0, True, 1e-20, 1, 0.0)
+    assert event.kind == coordination.CONVERGED
+    assert state[coordination.SIGMA] == pytest.approx(100 * 1e-6)
+    assert coordination.allowable_error(rule, 1e-20) == pytest.approx(1e-4)
+    assert coordination.allowable_error(rule, 4e-6) == pytest.approx(4e-4)  # above the floor: the paper's
+    assert coordination.allowable_error(RULE, 1e-20) == pytest.approx(1e-18)  # no floor: the paper's rule
+    for k in range(20):  # 5 mm per sample: noise, not a change
+        state, event = coordination.step(state, rule, 0.1 * (k + 1), True, 1e-20, 2 + k, 25e-6)
+        assert event is None
+    assert state[coordination.MODE] == coordination.OBSERVE
+
+
 def test_rule_validation():
+    with pytest.raises(ValueError, match="noise_rms"):
+        CoordinationRule(noise_rms=-1e-3)
     with pytest.raises(ValueError, match="max_consecutive_violations"):
         CoordinationRule(max_consecutive_violations=0)
     with pytest.raises(ValueError, match="allowable_error_factor"):

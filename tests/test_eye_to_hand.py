@@ -15,7 +15,8 @@ from sustain_drake.identification import (
     IdentificationError,
     calibrate_eye_to_hand,
 )
-from sustain_drake.identification.eye_to_hand import build_A, conditioning_transform, pack_x
+from sustain_drake.identification.candidates import best_p_HP_given_camera
+from sustain_drake.identification.eye_to_hand import build_A, conditioning_transform, pack_x, refine_joint
 from sustain_drake.identification.rotation import project_to_rotation
 
 
@@ -196,3 +197,50 @@ def test_random_streams_never_give_nan_or_undocumented_errors(samples, forgettin
 def test_batch_input_errors(p_C, X_WH, message):
     with pytest.raises(IdentificationError, match=message):
         calibrate_eye_to_hand(p_C, X_WH)
+
+
+def test_joint_refinement_equals_least_squares_over_every_points_samples():
+    """Three points fixed on the hand, each seen over its own narrow range of hand rotations (a
+    mark on one face of a tool): ``refine_joint`` from the three statistics reaches the optimum of
+    a least-squares solver that keeps every sample of every point, and its camera is better than
+    any single point's."""
+    truth = make_truth(21)
+    rng = np.random.default_rng(22)
+    points = [truth.p_HP, truth.p_HP + [0.05, -0.03, 0.1], truth.p_HP + [-0.04, 0.06, -0.08]]
+    axes = np.eye(3)
+    data, S_list, singles = [], [], []
+    for k, p_HP in enumerate(points):
+        X_WH = np.tile(np.eye(4), (150, 1, 1))
+        # Rotations within 0.15 rad about a base orientation that differs per point.
+        base = Rotation.from_rotvec(0.8 * axes[k])
+        X_WH[:, :3, :3] = (base * Rotation.from_rotvec(rng.normal(0, 0.15, (150, 3)))).as_matrix()
+        X_WH[:, :3, 3] = rng.uniform(-0.2, 0.2, (150, 3)) + [0.4, 0.0, 0.3]
+        p_W = np.einsum("nij,j->ni", X_WH[:, :3, :3], p_HP) + X_WH[:, :3, 3]
+        p_C = (p_W - truth.X_WC[:3, 3]) @ truth.X_WC[:3, :3] + rng.normal(0, 1.5e-3, (150, 3))
+        identifier = EyeToHandIdentifier()
+        for c, X in zip(p_C, X_WH, strict=True):
+            identifier.add_pose(c, X)
+        S_list.append(identifier.core.S)
+        singles.append(identifier.solve().estimate)
+        data.append((p_C, X_WH))
+    first = singles[0]
+    R, p_WC, P = refine_joint(S_list, first.R_WC, first.p_WC,
+                              np.array([best_p_HP_given_camera(np.r_[S.ravel(), 0, 0], first.R_WC, first.p_WC)
+                                        for S in S_list]))  # fmt: skip
+
+    def residuals(theta):
+        R_ = Rotation.from_rotvec(theta[:3]).as_matrix()
+        out = []
+        for k, (p_C, X_WH) in enumerate(data):
+            p_HP = theta[6 + 3 * k: 9 + 3 * k]
+            p_W = np.einsum("nij,j->ni", X_WH[:, :3, :3], p_HP) + X_WH[:, :3, 3]
+            out.append(p_C @ R_.T + theta[3:6] - p_W)
+        return np.concatenate(out).ravel()
+
+    start = np.concatenate([Rotation.from_matrix(truth.X_WC[:3, :3]).as_rotvec(), truth.X_WC[:3, 3], *points])
+    ls = least_squares(residuals, start, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    assert rotation_error_deg(R, Rotation.from_rotvec(ls.x[:3]).as_matrix()) < 1e-6
+    assert np.abs(p_WC - ls.x[3:6]).max() < 1e-7 and np.abs(P.ravel() - ls.x[6:]).max() < 1e-7
+    joint_error = rotation_error_deg(R, truth.X_WC[:3, :3])
+    assert joint_error < min(rotation_error_deg(e.R_WC, truth.X_WC[:3, :3]) for e in singles)
+    assert refine_joint([np.zeros((16, 16))] * 2, first.R_WC, first.p_WC, np.zeros((2, 3))) is None

@@ -16,9 +16,10 @@ _RULE = CoordinationRule()
 class CoordinationConfig:
     """Convergence criteria (paper §3.1 (a)-(c)) and the observation rule (§4.3).
 
-    ``max_expected_rms`` is in the formulation's residual units (metres for eye-to-hand; m/s^2
-    and N m together for the payload); ``max_ssd`` is ignored by formulations without a
-    rotation.
+    ``max_expected_rms`` and ``noise_rms`` (the sensor noise's per-sample RMS residual, a floor
+    under the expected error that the allowable error is made of; 0: the paper's rule) are in the
+    formulation's residual units (metres for eye-to-hand; m/s^2 and N m together for the payload);
+    ``max_ssd`` is ignored by formulations without a rotation.
     """
 
     max_expected_rms: float = _CRITERIA.max_expected_rms
@@ -29,6 +30,7 @@ class CoordinationConfig:
     allowable_error_factor: float = _RULE.allowable_error_factor
     max_consecutive_violations: int = _RULE.max_consecutive_violations
     pause_after_convergence: float = _RULE.pause_after_convergence
+    noise_rms: float = _RULE.noise_rms
 
     def criteria(self, has_rotation: bool = True) -> ConvergenceCriteria:
         return ConvergenceCriteria(
@@ -41,4 +43,5 @@ class CoordinationConfig:
             allowable_error_factor=self.allowable_error_factor,
             max_consecutive_violations=self.max_consecutive_violations,
             pause_after_convergence=self.pause_after_convergence,
+            noise_rms=self.noise_rms,
         )

@@ -69,7 +69,8 @@ def build_loop(builder, station, scenario):
         raise ScenarioError(f"hand_eye: {e}") from None
     tracker, detector, candidates, machine = loop.tracker, loop.detector, loop.candidates, loop.state_machine
     for name in ("color_image", "depth_image", "image_time"):
-        builder.Connect(station.GetOutputPort(name), tracker.GetInputPort(name))
+        for port in loop.image_inputs(name):
+            builder.Connect(station.GetOutputPort(name), port)
     builder.Connect(station.GetOutputPort("joint_positions"), detector.GetInputPort("actuator_positions"))
     if perception.confirm:  # the detector's confirming motions (paper §3.3), as in body_detection
         builder.Connect(detector.GetOutputPort("confirm"), station.GetInputPort("motion_confirm"))
@@ -217,6 +218,9 @@ def evaluate(handle, diagram, context) -> dict:
             "tool_point_error_mm": 1e3 * float(np.linalg.norm(est.p_HP - p_true)),
             "tool_point_distance_to_rod_tip_mm": 1e3 * float(np.linalg.norm(est.p_HP - rod_tip)),
             "expected_rms_mm": 1e3 * math.sqrt(max(est.mean_squared_error, 0.0)),
+            # The adopted point's own identification (the paper's one point), beside the adopted
+            # estimate (whose camera may be refined with other points: CandidateParams.joint).
+            **_single_point_errors(identifier, X_WC),
         })  # fmt: skip
 
     disturbances = _disturbances(scenario)
@@ -245,6 +249,15 @@ def evaluate(handle, diagram, context) -> dict:
             None if first is None else first["time_s"] - first["candidate_found_s"]),
         "observed_fraction": _observed_fraction(handle, diagram, context),
     }
+
+
+def _single_point_errors(identifier: EyeToHandIdentifier, X_WC: np.ndarray) -> dict:
+    single = identifier.solve().estimate
+    if single is None:
+        return {}
+    R_WC, p_WC = X_WC[:3, :3], X_WC[:3, 3]
+    return {"single_point_camera_position_error_mm": 1e3 * float(np.linalg.norm(single.p_WC - p_WC)),
+            "single_point_camera_rotation_error_deg": math.degrees(rotation_angle(single.R_WC.T @ R_WC))}
 
 
 def _observed_fraction(handle, diagram, context) -> float | None:

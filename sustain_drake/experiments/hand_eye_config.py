@@ -7,6 +7,7 @@ from dataclasses import field
 
 from sustain_drake.experiments.coordination_config import CoordinationConfig
 from sustain_drake.identification.candidates import CandidateParams
+from sustain_drake.perception.point_refinement import RefinementParams
 
 
 def _scenario_mirror(params_class, name: str, doc: str):
@@ -30,16 +31,28 @@ CandidatesConfig = _scenario_mirror(
 )
 
 
+RefinementConfig = _scenario_mirror(
+    RefinementParams,
+    "RefinementConfig",
+    "Drift-free points of the tracked features (sub-pixel corner, robust depth): see "
+    "``perception.point_refinement.RefinementParams`` (px, m).",
+)
+
+
 @dataclasses.dataclass
 class HandEyeConfig:
     """Sustainable marker-free hand-eye coordination: identifiers per candidate body feature and
     the identify <-> observe state machine.
 
-    ``false_alarm_window``: s, a detection with no disturbance in that long before it is a false
-    alarm (evaluation only). ``log_rate``: samples per second of the logged signals (plots)."""
+    ``refine_points``: feed the candidates the refined points (``FeatureRefiner``: sub-pixel
+    corner and robust depth, ``refinement``) instead of the tracker's. ``false_alarm_window``: s, a
+    detection with no disturbance in that long before it is a false alarm (evaluation only).
+    ``log_rate``: samples per second of the logged signals (plots)."""
 
     enabled: bool = False
     coordination: CoordinationConfig = field(default_factory=CoordinationConfig)
     candidates: CandidatesConfig = field(default_factory=CandidatesConfig)
+    refine_points: bool = True
+    refinement: RefinementConfig = field(default_factory=RefinementConfig)
     false_alarm_window: float = 2.0
     log_rate: float = 30.0

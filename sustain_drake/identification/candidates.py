@@ -46,6 +46,7 @@ from sustain_drake.identification.eye_to_hand import (
     EyeToHandSolution,
     build_A,
     pack_x,
+    refine_joint,
 )
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.identification.sustainable_identifier import (
@@ -92,6 +93,15 @@ class CandidateParams:
             (``rotation_spread``): while the hand only translates, any point fits.
         reacquire_radius: m, how near the adopted estimate's prediction a body feature must be to
             take over the observation of a lost observed feature.
+        joint: when a leader is chosen (the paper's verdict on its own point), refine its camera
+            jointly with every other candidate that it explains (``_joint_refined``; beyond the
+            paper, which uses one point): a mark on one face of the tool is tracked over a few
+            tenths of a radian of hand rotation only, and the points together saw more.
+        joint_min_samples: samples a candidate needs to join the joint refinement.
+        max_archived: candidates kept after their track ended (their statistic is still a valid
+            constraint on the camera) for the joint refinement, the most samples first.
+        max_observers: consistent points observed besides the observed point and its witness
+            (``_observe``; 0: the observed point and witness only).
         pose_tolerance: s, how far the nearest hand pose may be from a frame's capture time.
     """
 
@@ -111,9 +121,14 @@ class CandidateParams:
     keep_camera: bool = True
     confirm_with_witness: bool = True
     min_rotation_spread: float = 0.15
+    joint: bool = False
+    joint_min_samples: int = 30
+    max_archived: int = 16
+    max_observers: int = 0
 
     def __post_init__(self):
-        if not (self.observe_min_samples >= 1 and self.primary_failures >= 1):
+        if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
+                and self.max_archived >= 0 and self.max_observers >= 0):
             raise ValueError(f"observe_min_samples and primary_failures must be >= 1 ({self})")
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
@@ -193,6 +208,8 @@ class CandidateBank:
     primary_failures: int = 0  # consecutive samples the observed point alone violated
     adopted_mse: float = math.inf  # a^2 lambda_N of the leader when it was chosen, m^2
     previous_x: np.ndarray | None = None  # the model abandoned at the last reset (Eq. (36))
+    archive: tuple = ()  # candidates whose track ended, kept for the joint refinement
+    observers: tuple = ()  # extra observed points: (feature_id, p_HP, (p_CP, X_WH) of the last frame)
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -294,7 +311,8 @@ def step(
         bank = replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
                        last_reset=float(reset), round_start=math.nan,
                        observed_last=None, observed_p_HP=None,
-                       witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0)
+                       witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
+                       observers=())
     bank = record_pose(bank, time, X_WH)
     if not frame_time > bank.last_frame:
         return bank  # no new frame (or none yet)
@@ -313,12 +331,13 @@ def step(
     # Candidates are fed while searching: before a leader exists, or when the observed point is
     # lost (a new point to observe). Otherwise the leader alone keeps feeding, the others are frozen.
     searching = bank.leader < 0 or bank.observed < 0
-    kept, fed = [], False
+    kept, fed, archive = [], False, list(bank.archive)
     for c in bank.candidates:
         k = row.get(c.feature_id)
         is_leader = c.feature_id == bank.leader
         if k is None and not is_leader:
-            continue  # no longer tracked: gone for good (ids are never reused)
+            archive.append(c)  # no longer tracked: gone for good (ids are never reused)
+            continue
         if k is not None and usable[k] and (searching or is_leader):
             num = c.solution.num_samples
             c = _feed(c, params, criteria, frame_time, p_CP[k], X_frame, forgetting_factor,
@@ -326,12 +345,15 @@ def step(
             fed = fed or c.solution.num_samples > num
         if searching and not is_leader:
             if frame_time - c.last_sample > params.max_lost_time:
+                archive.append(c)
                 continue  # occluded too long: the slot is freed
             sol = c.solution
             too_long = frame_time - c.admitted > params.max_unconverged_time and not sol.verdict.converged
             misfit = sol.num_samples >= criteria.min_samples and not sol.expected_rms <= params.reject_rms
             if too_long or misfit:
                 rejected = rejected | {c.feature_id}
+                if too_long and not misfit:
+                    archive.append(c)  # slow, not wrong: its samples still constrain the camera
                 continue
         kept.append(c)
 
@@ -351,20 +373,25 @@ def step(
                 fed = True
                 if math.isnan(round_start):
                     round_start = float(frame_time)
-    if leader < 0:
-        # The first to converge leads (the smallest expected error among simultaneous ones).
-        converged = [c for c in kept if c.solution.verdict.converged]
-        if converged:
+    archive = _archived(archive, params)
+    # The first to converge leads (the smallest expected error among simultaneous ones).
+    converged = [] if leader >= 0 else [c for c in kept if c.solution.verdict.converged]
+    if converged:
             best = min(converged, key=lambda c: c.solution.expected_mse)
             best = _solve(best, criteria, forgetting_factor, refine=True)
             confirmed = _confirmed(best, kept, params, row, usable, (p_CP, X_frame))
             if best.solution.verdict.converged and confirmed:
+                kind = "identified"
+                if params.joint:
+                    best, num_points = _joint_refined(best, kept, archive, params)
+                    if num_points > 1:
+                        kind = f"identified, camera refined with {num_points} points"
                 kept = [best if c.feature_id == best.feature_id else c for c in kept]
                 leader = best.feature_id
                 adopted_mse = best.solution.expected_mse
                 adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
-                                                  best.admitted, round_start, best.solution.estimate),)
-        elif params.keep_camera and bank.previous_x is not None:
+                                                  best.admitted, round_start, best.solution.estimate, kind),)
+    elif leader < 0 and params.keep_camera and bank.previous_x is not None:
             # A slipped tool leaves the camera where it was: if the abandoned model's camera
             # explains a candidate's samples (with its own p_HP), only p_HP is re-identified.
             options = _consistent(replace(bank, candidates=tuple(kept)), params, row, usable,
@@ -381,7 +408,7 @@ def step(
     # checks a solution's samples against the count since a reset); after, observations count.
     count = bank.sample_count + (1 if fed and bank.leader < 0 else 0)
     bank = replace(bank, candidates=tuple(kept), leader=leader, rejected=rejected, round_start=round_start,
-                   sample_count=count,
+                   sample_count=count, archive=tuple(archive),
                    last_frame=float(frame_time), adoptions=adoptions,
                    observed=bank.observed if leader == bank.leader else leader,
                    observed_last=bank.observed_last if leader == bank.leader else None,
@@ -390,6 +417,54 @@ def step(
                    adopted_mse=adopted_mse)
     return _observe(bank, params, frame_time, X_frame, ids, p_CP, usable, on_body | in_body_cell, row,
                     reference_x, allowable_error)
+
+
+def _archived(archive: list, params: CandidateParams) -> list:
+    """The archive bounded to ``max_archived`` candidates with enough samples, the most first."""
+    if not params.joint:
+        return []
+    useful = [c for c in archive if c.solution.num_samples >= params.joint_min_samples]
+    return sorted(useful, key=lambda c: -c.solution.num_samples)[: params.max_archived]
+
+
+def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tuple[Candidate, int]:
+    """``params.joint``: the leader's camera refined jointly with every other candidate (tracked
+    or archived, ``joint_min_samples`` samples) that it explains (``eye_to_hand.refine_joint``:
+    one camera, one ``p_HP`` per point). Members are the points whose own mean squared error
+    (with their best ``p_HP``) is within ``observe_consistency^2`` times the leader's, first under
+    the leader's camera, then again under the joint one. Returns the leader with the joint camera
+    and its own ``p_HP`` (its verdict and ``expected_mse`` unchanged: the paper's rule judges the
+    leader), and the number of points used."""
+    estimate = best.solution.estimate
+    if estimate is None:
+        return best, 1
+    others = [c for c in list(kept) + list(archive)
+              if c.feature_id != best.feature_id and c.solution.num_samples >= params.joint_min_samples]
+    R, p_WC = estimate.R_WC, estimate.p_WC
+    limit = params.observe_consistency**2 * max(best.solution.expected_mse, 1e-12)
+    members = []
+    for _ in range(2):
+        members = [c for c in others if mean_squared_error_of(
+            c.statistic, pack_x(R, p_WC, best_p_HP_given_camera(c.statistic, R, p_WC))) <= limit]
+        if not members:
+            return best, 1
+        group = [best] + members
+        P = np.array([best_p_HP_given_camera(c.statistic, R, p_WC) for c in group])
+        refined = refine_joint([_sum_statistic(c) for c in group], R, p_WC, P)
+        if refined is None:
+            return best, 1
+        R, p_WC, P = refined
+    x = pack_x(R, p_WC, P[0])
+    joint = EyeToHandEstimate(R, p_WC.copy(), P[0].copy(), x, mean_squared_error_of(best.statistic, x))
+    solution = replace(best.solution, projected=joint, refined=joint)
+    return replace(best, solution=solution), len(members) + 1
+
+
+def _sum_statistic(c: Candidate) -> np.ndarray:
+    """The candidate's ``S = sum A_t^T A_t`` (16 x 16) from its state vector."""
+    identifier = EyeToHandIdentifier()
+    identifier.set_state(c.statistic)
+    return identifier.core.S
 
 
 def _confirmed(c: Candidate, kept, params: CandidateParams, row, usable, frame) -> bool:
@@ -442,6 +517,50 @@ def _feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, r
 
 def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
              allowable_error=math.inf) -> CandidateBank:
+    """``_observe_primary`` (the observed point and its witness), then the extra observers
+    (``params.max_observers``): every consistent point tracked now gives its own ``s_t`` under the
+    adopted camera with its own ``p_HP``, and the reported ``s_t`` is the smallest of all. A change
+    of the body (a slipped tool, a moved camera) moves every point of the hand, a tracking failure
+    one; and while the observed point is lost (its face turned away, or its track ended in the
+    change itself) the observers keep the observation going, so a change is not missed for want of
+    the one point the paper observes."""
+    before = bank.sample_count
+    bank = _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
+                            allowable_error)  # fmt: skip
+    if params.max_observers == 0 or bank.leader < 0:
+        return bank
+    x = reference_x if x_is_set(reference_x) else bank.find(bank.leader).solution.x
+    if not x_is_set(x):
+        return bank
+    x = np.array(x, dtype=float)
+    errors, observers = [], []
+    for feature_id, p_HP, last in bank.observers:
+        k = _gated_row(feature_id, last, row, p_CP, X_WH, params)
+        if k is None or feature_id in (bank.observed, bank.witness):
+            continue  # lost, jumped, or observed already: dropped
+        if usable[k]:
+            x[12:15] = p_HP
+            errors.append(_error(p_CP[k], X_WH, x))
+            last = (p_CP[k].copy(), X_WH)
+        observers.append((feature_id, p_HP, last))
+    if len(observers) < params.max_observers:
+        taken = {o[0] for o in observers} | {bank.observed, bank.witness}
+        options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=tuple(taken))
+        for _, feature_id, p_HP, k in sorted(options, key=lambda o: o[0]):
+            if len(observers) >= params.max_observers:
+                break
+            observers.append((feature_id, p_HP, (p_CP[k].copy(), X_WH)))
+    bank = replace(bank, observers=tuple(observers))
+    if not errors:
+        return bank
+    smallest = min(errors)
+    if bank.sample_count > before:  # the observed point (or its witness) gave a sample too
+        return replace(bank, sample_error=min(bank.sample_error, smallest))
+    return replace(bank, sample_count=bank.sample_count + 1, sample_error=smallest)
+
+
+def _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
+                     allowable_error=math.inf) -> CandidateBank:
     """The observed point's ``s_t`` (Eq. (2)) under the reference estimate, confirmed by a witness;
     when it is lost, re-acquisition near the prediction or another consistent candidate.
 

@@ -2,8 +2,13 @@
 
 IDENTIFY: samples accumulate in the identifier; when its verdict says converged, the estimate is
 adopted together with an allowable error derived from the identification itself,
-``sigma = allowable_error_factor * a^2 lambda_N`` (the paper: 100 lambda_16), the motion pauses
-(the paper: 3 s) and the mode becomes OBSERVE.
+``sigma = allowable_error_factor * max(a^2 lambda_N, noise_rms^2)`` (the paper: 100 lambda_16), the
+motion pauses (the paper: 3 s) and the mode becomes OBSERVE.
+
+The floor ``noise_rms`` (beyond the paper) is the per-sample RMS residual that the sensor's noise
+alone gives (the formulation's residual units; 0: no floor, the paper's rule). No model explains
+new samples better than the noise in them, so an identification's ``a^2 lambda_N`` below it is
+over-fitting or round-off: on near noise-free data it would make round-off count as violations.
 
 OBSERVE: each new sample's error under the adopted estimate, ``s_t = ||A_t x||^2`` (Eq. (2)), is
 compared with ``sigma``; after ``max_consecutive_violations`` consecutive samples over it (the
@@ -34,7 +39,10 @@ class CoordinationRule:
     """The thresholds of the rule (all settable from a scenario file).
 
     Attributes:
-        allowable_error_factor: ``sigma = factor * a^2 lambda_N`` (paper: 100).
+        allowable_error_factor: ``sigma = factor * max(a^2 lambda_N, noise_rms^2)`` (paper: 100).
+        noise_rms: the per-sample RMS residual of the sensor's noise alone, in the formulation's
+            residual units (m for eye-to-hand); the floor under the expected mean squared error
+            (0: none, the paper's rule).
         max_consecutive_violations: this many consecutive samples over ``sigma`` is a change
             (paper: 10; so 9 do nothing).
         pause_after_convergence: seconds the motion pauses after a convergence (paper: 3 s).
@@ -43,8 +51,11 @@ class CoordinationRule:
     allowable_error_factor: float = 100.0
     max_consecutive_violations: int = 10
     pause_after_convergence: float = 3.0
+    noise_rms: float = 0.0
 
     def __post_init__(self):
+        if not (self.noise_rms >= 0 and math.isfinite(self.noise_rms)):
+            raise ValueError(f"noise_rms must be >= 0, got {self.noise_rms}")
         if not (self.allowable_error_factor > 0 and math.isfinite(self.allowable_error_factor)):
             raise ValueError(f"allowable_error_factor must be positive, got {self.allowable_error_factor}")
         if not self.max_consecutive_violations >= 1:
@@ -58,6 +69,12 @@ class CoordinationRule:
 # Layout of the state vector.
 MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE = range(9)
 STATE_SIZE = 9
+
+
+def allowable_error(rule: CoordinationRule, expected_mse: float) -> float:
+    """``sigma = factor * max(a^2 lambda_N, noise_rms^2)``: the paper's allowable error (§3.1, §4.3:
+    100 lambda_16) with the sensor's noise as a floor under the identification's expected error."""
+    return rule.allowable_error_factor * max(expected_mse, rule.noise_rms**2, 0.0)
 
 
 def initial_state() -> np.ndarray:
@@ -110,7 +127,7 @@ def step(
         if converged and math.isfinite(expected_mse) and not stale:
             new[MODE] = OBSERVE
             new[VIOLATIONS] = 0
-            new[SIGMA] = rule.allowable_error_factor * max(expected_mse, 0.0)
+            new[SIGMA] = allowable_error(rule, expected_mse)
             new[PAUSE_ID] += 1
             new[CONVERGENCES] += 1
             return new, Event(time, CONVERGED, f"allowable error {new[SIGMA]:.3g}")

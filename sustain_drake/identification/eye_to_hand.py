@@ -341,3 +341,40 @@ class EyeToHandIdentifier(FormulationIdentifier):
                 refined = None
         verdict = judge(self.criteria, n, eigen, math.sqrt(expected_mse), None, proj.ssd, " m")
         return EyeToHandSolution(eigen, a, proj.ssd, expected_mse, projected, refined, verdict, n)
+
+
+# ---- several points at once (beyond the paper: the paper identifies from one point) -----------
+def refine_joint(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray,
+                 max_iterations: int = 30, tolerance: float = 1e-10):
+    """Gauss-Newton on SO(3) x R^3 x (R^3)^K of ``sum_k x_k^T S_k x_k`` (every point's geometric
+    least-squares cost, one camera; ``S_k`` the raw 16 x 16 statistic of point k), from the
+    statistics alone: ``refine`` for K points fixed on the hand, which need not be seen in the same
+    frames. The camera is what all of them must agree on, so its rotation is excited by the union of
+    the points' views. Start from a single point's estimate (``p_HP``: K x 3). Returns
+    ``(R_WC, p_WC, p_HP)``, or None if the normal equations are singular (degenerate data)."""
+    K = len(S_list)
+    R, p_WC, p_HP = R.copy(), np.array(p_WC, float), np.array(p_HP, float).reshape(K, 3)
+    J = np.zeros((N_UNKNOWNS, 9))
+    J[9:15, 3:9] = np.eye(6)
+    n = 6 + 3 * K
+    for _ in range(max_iterations):
+        _jacobian(R, J)
+        H, g = np.zeros((n, n)), np.zeros(n)
+        for k, S in enumerate(S_list):
+            x = pack_x(R, p_WC, p_HP[k])
+            idx = np.r_[0:6, 6 + 3 * k: 9 + 3 * k]
+            H[np.ix_(idx, idx)] += J.T @ S @ J
+            g[idx] += J.T @ (S @ x)
+        try:
+            delta = -np.linalg.solve(H, g)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(delta)) or np.abs(delta).max() > 1e3:
+            return None
+        R = R @ so3_exp(delta[0:3])
+        p_WC = p_WC + delta[3:6]
+        p_HP = p_HP + delta[6:].reshape(K, 3)
+        if np.abs(delta).max() < tolerance:
+            break
+    U, _, Vt = np.linalg.svd(R)
+    return U @ Vt, p_WC, p_HP

@@ -2,17 +2,78 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
+from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
 
 from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank, CandidateParams
 from sustain_drake.identification.eye_to_hand import N_UNKNOWNS
+from sustain_drake.identification.sustainable_identifier import Verdict
 from sustain_drake.perception.optical_flow import TrackedFeatures
+from sustain_drake.perception.point_refinement import RefinementParams, refine_points
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
+from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
 from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation, declare_solution_outputs
+
+
+class FeatureRefiner(LeafSystem):
+    """The tracked features with drift-free 3-D points (``perception.point_refinement``): each
+    feature's pixel moved to the image's sub-pixel corner near it, its depth a robust median on the
+    same surface. Put between an ``OpticalFlowTracker`` and ``CandidateIdentifiers``: a point fixed
+    on the hand (Eq. (30)) must be the same physical point in every frame, which a frame-to-frame
+    track is not (it drifts by millimetres over tens of seconds).
+
+    .. pydrake_system::
+
+        name: FeatureRefiner
+        input_ports:
+        - tracked_features
+        - color_image
+        - depth_image
+        - image_time (optional)
+        output_ports:
+        - tracked_features
+
+    ``tracked_features`` out is the input with ``p_px``, ``p_CP`` and ``valid`` replaced (same ids
+    and order, so a detector's body flags still match). The images must be the frame the features
+    come from: when ``image_time`` (connected) differs from the features' ``time``, every feature is
+    invalid for that evaluation (no point is better than a point from another frame). No state:
+    the output is a function of the inputs.
+    """
+
+    def __init__(self, camera_info: CameraInfo, params: RefinementParams | None = None):
+        super().__init__()
+        self._intrinsics = intrinsics_from_camera_info(camera_info)
+        self._params = params or RefinementParams()
+        self._features = self.DeclareAbstractInputPort(
+            "tracked_features", AbstractValue.Make(TrackedFeatures()))
+        self._color = self.DeclareAbstractInputPort("color_image", AbstractValue.Make(ImageRgba8U()))
+        self._depth = self.DeclareAbstractInputPort("depth_image", AbstractValue.Make(ImageDepth32F()))
+        self._time = self.DeclareVectorInputPort("image_time", 1)
+        self.DeclareAbstractOutputPort(
+            "tracked_features", lambda: AbstractValue.Make(TrackedFeatures()), self._calc)
+
+    @property
+    def params(self) -> RefinementParams:
+        return self._params
+
+    def _calc(self, context, output) -> None:
+        features = self._features.Eval(context)
+        same_frame = (not self._time.HasValue(context)
+                      or abs(float(self._time.Eval(context)[0]) - features.time) < 1e-9)
+        color, depth = self._color.Eval(context).data, self._depth.Eval(context).data
+        shape_ok = color.shape[:2] == (self._intrinsics.height, self._intrinsics.width) == depth.shape[:2]
+        if len(features) == 0 or not (same_frame and shape_ok):
+            p_CP, valid, p_px = np.zeros((len(features), 3)), np.zeros(len(features), bool), features.p_px
+        else:
+            p_CP, valid, p_px = refine_points(color, depth, features.p_px, self._intrinsics,
+                                              self._params, return_pixels=True)
+        output.set_value(dataclasses.replace(features, p_px=p_px, p_CP=p_CP, valid=valid))
 
 
 class CandidateIdentifiers(LeafSystem):
@@ -103,9 +164,17 @@ class CandidateIdentifiers(LeafSystem):
         return context.get_abstract_state(self._bank).get_value()
 
     def solution(self, context):
-        """The shown candidate's solution (an empty one before any candidate)."""
-        shown = self.bank(context).shown
-        return self._empty if shown is None else shown.solution
+        """The shown candidate's solution (an empty one before any candidate). Only a leader's
+        solution says converged: before one is chosen (a single candidate's verdict may say
+        converged before a second point confirms it, or before the joint identification does),
+        the shown solution's verdict is "not converged", so a state machine adopts leaders only."""
+        bank = self.bank(context)
+        shown = bank.shown
+        if shown is None:
+            return self._empty
+        if bank.leader < 0 and shown.solution.verdict.converged:
+            return dataclasses.replace(shown.solution, verdict=Verdict(False, "no leader chosen yet"))
+        return shown.solution
 
     def _update(self, context, state) -> None:
         features = self._features.Eval(context)
