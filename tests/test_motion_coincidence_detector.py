@@ -181,7 +181,9 @@ def test_closed_loop_confirming_motions_mark_arm_cells_and_never_the_distractor(
     arm_cells = cols <= 2
     distractor_cells = (rows >= 2) & (rows <= 3) & (cols >= 5) & (cols <= 6)
     assert detector.GetOutputPort("confirm_request").Eval(ctx)[1] >= 2
-    assert ever[arm_cells].mean() >= 0.8
+    # Arm cells are marked by the cell rule or by the confirmed features they hold (cells
+    # holding one raise no more requests, so the cell rule may stop short of them).
+    assert (ever | ever_feature_cells)[arm_cells].mean() >= 0.8
     assert not ever[cols >= 5].any() and not ever[distractor_cells].any()
     # features confirmed one by one: on the arm half only, and they mark its cells
     assert len(body_feature_u) > 100 and max(body_feature_u) < W // 2 + 10

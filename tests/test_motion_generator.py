@@ -141,6 +141,49 @@ def test_confirm_with_a_joint_moves_only_that_joint_after_returning(joint):
     assert 0.45 <= np.argmin(rest) * 0.01 <= 0.56
 
 
+def test_quick_confirm_answers_in_place_with_steps_of_confirm_step():
+    # Request 1 while the first move has barely begun, 2 during the first step (a follow-up:
+    # the step finishes first), 3 during the rest after the second step.
+    step, hold = 0.05, 0.2
+    gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5, min_duration=0.2,
+                          confirm_hold=hold, confirm_step=step, confirm_near=0.1)
+    times_req = [0.0, 0.15, 0.45, 1.05]
+    values = [np.concatenate([[i, -1.0], START]) for i in range(4)]
+    times, x = run(gen, 3.0, confirm=(times_req, values))
+    q, v = x[:, :3], x[:, 3:]
+    moving = np.max(np.abs(v), axis=1) > 1e-9
+    # No return: the arm brakes where it is, close to the posture, and stays within 1.5 steps
+    # (plus the braking distance) around it while it confirms.
+    window = times < 1.5
+    assert np.max(np.abs(q[window] - START)) < 1.5 * step + 0.01
+    # Moves start from rest: the first step after the hold at the braking posture, the next
+    # ones one step (0.2 s, min_duration) and one hold later.
+    starts = times[1:][moving[1:] & ~moving[:-1]]
+    starts = starts[starts > 0.1]             # after the first move's start at 0
+    assert 0.15 + hold - 0.02 <= starts[0] <= 0.15 + hold + 0.08
+    np.testing.assert_allclose(np.diff(starts[:3]), 0.2 + hold, atol=0.03)
+    # Each step moves every joint by confirm_step.
+    for k in range(2):
+        i0, i1 = np.searchsorted(times, starts[k]), np.searchsorted(times, starts[k + 1])
+        np.testing.assert_allclose(np.abs(q[i1 - 1] - q[i0 - 1]), step, atol=1e-6)
+    # With no further request, the arm rests confirm_hold after its last step, then babbles on.
+    assert np.max(np.abs(q[-1] - START)) > 0.1
+
+
+def test_quick_confirm_far_from_the_posture_still_goes_back():
+    target = np.array([0.4, 0.7, 0.6])
+    gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5, min_duration=0.2,
+                          confirm_hold=0.2, confirm_step=0.05, confirm_near=0.1)
+    times, x = run(gen, 4.0, confirm=np.concatenate([[1.0, -1.0], target]))
+    q, v = x[:, :3], x[:, 3:]
+    reached = np.flatnonzero(np.linalg.norm(q - target, axis=1) < 1e-6)
+    assert reached.size
+    # ... then, after the hold, one step of 0.05 rad per joint, and a rest at its end.
+    after = reached[-1] + 1
+    rest = after + np.argmax(np.max(np.abs(v[after:]), axis=1) < 1e-12)
+    np.testing.assert_allclose(np.abs(q[rest] - target), 0.05, atol=1e-6)
+
+
 @pytest.mark.parametrize("args", [
     (LOWER, UPPER[:2], START),
     (UPPER, LOWER, START),

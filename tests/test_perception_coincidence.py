@@ -290,3 +290,41 @@ def test_chance_rate_counts_onsets_outside_actuator_windows_while_the_arm_moves(
     assert s.spontaneous_rate(p)[0] == pytest.approx(0.5, rel=0.05)  # ~ the prior: never still
     assert s.chance_rate(p)[0] == pytest.approx(3.0, rel=0.25)   # onsets / quiet-cell time
     assert s.chance_probability(p)[0] > 0.5
+
+
+def test_cells_of_the_same_move_seen_later_join_the_first_request():
+    """The move that raises a request (joint onset at sample 30, cell 0 at 31) shows cell 1 a
+    little later (sample 36, within τ_a): cell 1 joins the candidates before the trial."""
+    n = 45
+    states = drive(signal(n, (30, 45))[:, None],
+                   np.stack([signal(n, (31, 45)), signal(n, (36, 45))], axis=1))
+    assert states[33].candidates.tolist() == [1.0, 0.0]
+    assert states[-1].candidates.tolist() == [1.0, 1.0] and states[-1].request_count == 1
+    assert states[-1].cand_act.tolist() == [[1.0, 1.0]]
+
+
+def _scripted_cycles(params, n_cycles=6):
+    """1.5 s cycles: rest at q* = 0, move out for 0.33 s (the body cell responds one frame
+    later), hold, jump back to q* (far from q*: not a trial). Returns the final state."""
+    n_cycle = 45
+    state = CoincidenceState(1, 1)
+    for k in range(n_cycle * n_cycles):
+        phase = k % n_cycle
+        q = 0.5 * DT * (np.clip(phase, 15, 25) - 15) if phase < 40 else 0.0
+        state = step(state, (k + 1) * DT, np.array([q]), 50.0 * np.array([16 <= phase < 27]),
+                     params)
+    return state
+
+
+def test_max_sequence_trials_ends_a_chain_of_follow_ups():
+    # A cell that needs many hits (alpha tiny): without a limit every cycle after the first is
+    # a trial of one chain of follow-ups; with a limit of 2, the chain ends after two trials
+    # and the next coincidence starts a new one (its move is no trial: one cycle is lost).
+    slow = dict(alpha=1e-12)
+    free = _scripted_cycles(CoincidenceParams(**slow))
+    limited = _scripted_cycles(CoincidenceParams(max_sequence_trials=2, **slow))
+    assert free.trial_count == 5 and free.request_count == 6
+    assert limited.trial_count == 4 and limited.request_count == 4   # cycles 1, 2 | 3: new | 4, 5
+    assert limited.sequence_trials <= 2
+    with pytest.raises(ValueError, match="max_sequence_trials"):
+        CoincidenceParams(max_sequence_trials=-1)

@@ -46,8 +46,11 @@ class BodyDetectionConfig:
     confirm_timeout: float = _RULE.confirm_timeout
     request_interval: float = _RULE.request_interval
     single_joint_confirm: bool = _RULE.single_joint_confirm
-    # Body features: confirming-trial hits that make a tracked feature body.
+    max_sequence_trials: int = _RULE.max_sequence_trials
+    # Body features: confirming-trial hits that make a tracked feature body, and the per-frame
+    # flow (px) at or above which a feature moves (its onset "rises up from" below it).
     feature_hits: int = FeatureParams().hits
+    feature_flow_threshold_px: float = FeatureParams().flow_threshold_px
     # Cells holding a confirmed body feature raise no confirming request.
     skip_feature_cells: bool = FeatureParams().skip_known_cells
     # Evaluation (label image, for evaluation only): a cell is true body where the robot's
@@ -66,10 +69,12 @@ class BodyDetectionConfig:
             body_onset_rate=self.body_onset_rate, memory=self.memory,
             response_window=self.response_window, posture_tolerance=self.posture_tolerance,
             confirm_timeout=self.confirm_timeout, request_interval=self.request_interval,
-            single_joint_confirm=self.single_joint_confirm)
+            single_joint_confirm=self.single_joint_confirm,
+            max_sequence_trials=self.max_sequence_trials)
 
     def feature_params(self) -> FeatureParams:
-        return FeatureParams(hits=self.feature_hits, skip_known_cells=self.skip_feature_cells)
+        return FeatureParams(hits=self.feature_hits, skip_known_cells=self.skip_feature_cells,
+                             flow_threshold_px=self.feature_flow_threshold_px)
 
     def tracker_params(self) -> TrackerParams:
         return TrackerParams(max_corners=self.max_corners, min_distance_px=self.min_distance_px,

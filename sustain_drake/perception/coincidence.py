@@ -63,6 +63,34 @@ moves by itself" (it falls in the window by chance with probability ``p0_j``). I
    that held a distractor can still become body later (the arm may move into it).
 4. Cell ``j`` is **body** while ``L_j >= ln(1/alpha)``.
 
+*Quick trials (detection latency).* The time to detect a cell is paid in trials, and a trial
+costs a return to ``q*``, a hold and the response. Three things make trials follow each other
+every ~0.45 s (measured per cell on ``diagrams/body_detection.yaml``: with a return and a full
+babbling move per trial, trials came every ~1 s and the cells the arm covers at its first
+move were marked 1.5-2 s after their first motion):
+
+- the motion generator answers a request whose ``q*`` is close to where the arm is *in
+  place* (it brakes, rests, and moves again by a short step of every joint, out the way it was
+  moving and back; ``MotionGenerator`` ``confirm_near``, ``confirm_step``), so a trial needs
+  no return, and ``posture_tolerance`` admits the steps' postures;
+- pairs of the move that raised a request (its actuator onsets up to the request) that
+  coincide while the request waits for its trial join its candidates: slower cells and
+  joints of the same move are tested in the same trial instead of waiting for a request of
+  their own. Follow-up requests take only the cells that hit (the trial steps' onsets would
+  let every busy cell in);
+- ``max_sequence_trials`` ends a chain of follow-ups at one posture (a cell that hits about
+  as often as it misses, e.g. one the steps move the arm in and out of, would hold the arm
+  there forever), so the arm babbles on and shows the rest of the image.
+
+None of this changes the test: a trial's onset time is set by the robot (its hold), and its
+candidates are chosen before that onset, from the past only, so under "the cell moves by
+itself" the likelihood ratio of each trial still has expectation 1 given the past, and
+``L_j`` stays a supermartingale (a martingale but for the floor ``ln(beta)``, from which a
+new run up to ``ln(1/alpha)`` has probability at most ``alpha beta``). What can break it is
+the same as before: ``p0_j`` underestimated, e.g. a cell that was quiet until the person
+walked in (its rate was measured before); more trials per minute give such a cell more
+chances, so the chain limit and the follow-ups-only-for-hits rule also bound the exposure.
+
 Under "the cell moves by itself" each trial's likelihood ratio has expectation 1, so a distractor
 cell is marked with probability about ``alpha`` (more if ``λ_j`` is underestimated). With the
 defaults (``p_response`` = 0.9, ``alpha`` = 1e-3, ``w`` = 0.3 s) a cell needs four confirming
@@ -111,6 +139,9 @@ class CoincidenceParams:
     request_interval: float = 0.0      # s: a new coincidence raises a request only this long
     #                                    after the last request ended (follow-ups at once), so
     #                                    the babbling explores between confirmations
+    max_sequence_trials: int = 0       # trials in one sequence of follow-ups at a posture, after
+    #                                    which the arm babbles on (0: no limit); a cell that
+    #                                    hits about as often as it misses would hold it forever
     response_window: float | None = None  # s: a trial hit's visual onset must follow the
     #                                    actuator onset within this; None: τ_s. A window as
     #                                    short as the real sensor latency makes p0_j smaller.
@@ -124,7 +155,7 @@ class CoincidenceParams:
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be finite and positive, got {value}")
         for name in ("adot_threshold", "sdot_threshold", "quiet_a", "quiet_s", "hold_spread",
-                     "request_interval"):
+                     "request_interval", "max_sequence_trials"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
@@ -166,6 +197,8 @@ _FIELDS = (
     ("trial_count", lambda na, nc: ()),       # trials started so far
     ("trial_until", lambda na, nc: ()),       # end of the latest trial's response window
     ("request_end", lambda na, nc: ()),       # when the latest request was cleared
+    ("sequence_trials", lambda na, nc: ()),   # trials since the latest request raised by a
+    #                                           coincidence (its follow-ups included)
     ("a_prev", lambda na, nc: (na,)),         # previous actuator values a_i
     ("last_motion_a", lambda na, nc: (na,)),  # last time actuator i moved
     ("t_onset_a", lambda na, nc: (na,)),      # last onset time of actuator i
@@ -398,6 +431,14 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
              params: CoincidenceParams, known: np.ndarray):
     """Confirming motions: raise a request, recognise its trial, score hits and misses."""
     if s.request_active and not s.trial_active:
+        # Pairs of the move that raised the request (its actuator onsets, up to the request),
+        # seen a little later (slower cells and joints), join its candidates while it waits for
+        # its trial: chosen before the trial, like the first ones, so the trial's evidence stays
+        # unbiased. Not for follow-ups: the trial steps' onsets would let every busy cell in.
+        late = new & ~(s.body(params) | known)[None, :] & (s.sequence_trials == 0) & (
+            s.t_onset_a <= s.request_time)[:, None]
+        s.cand_act = np.maximum(s.cand_act, late)
+        s.candidates = np.maximum(s.candidates, late.any(axis=0))
         # Rows of q_onset for this sample's onsets all hold the posture the motion started from.
         started_near = onset_a.any() and np.max(
             np.abs(s.q_onset[np.argmax(onset_a)] - s.q_request)) <= params.posture_tolerance
@@ -405,6 +446,7 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             s.trial_active = np.float64(1)
             s.trial_t0 = np.float64(t)
             s.trial_count += 1
+            s.sequence_trials += 1
             s.trial_until = np.float64(t + params.trial_window)
             s.trial_cells = s.candidates.copy()
             s.trial_moved[:] = 0
@@ -436,7 +478,8 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             follow = (s.trial_hit > 0) & ~(s.body(params) | known)[None, :]
             q = s.q_request.copy()
             _clear_request(s, t)
-            if follow.any():
+            limit = params.max_sequence_trials
+            if follow.any() and (limit == 0 or s.sequence_trials < limit):
                 _raise_request(s, t, follow, q, params)
         return
 
@@ -445,6 +488,7 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
         if trigger.any():
             acts = np.flatnonzero(trigger.any(axis=1))
             latest = acts[np.argmax(s.t_onset_a[acts])]
+            s.sequence_trials = np.float64(0)
             _raise_request(s, t, trigger, s.q_onset[latest], params)
 
 

@@ -247,7 +247,7 @@ def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
     motion = builder.AddSystem(MotionGenerator(
         lower, upper, world.posture, seed=m.seed, max_speed=m.max_speed,
         min_duration=m.min_duration, dwell=m.dwell, period=m.period,
-        confirm_hold=m.confirm_hold))
+        confirm_hold=m.confirm_hold, confirm_step=m.confirm_step, confirm_near=m.confirm_near))
     motion.set_name("motion_generator")
     n = len(ARM_JOINTS)
     # The arm instance's desired state is [q_1..q_5, q_grip, v_1..v_5, v_grip].

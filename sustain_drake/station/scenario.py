@@ -93,6 +93,11 @@ class MotionConfig:
     min_duration: float = 1.0  # s, the shortest move
     dwell: float = 0.0  # s of rest after each move (quasi-static identification)
     confirm_hold: float = 0.5  # s of rest at a confirm posture before moving again
+    # Quick confirming trials (MotionGenerator): a confirm request within confirm_near rad of
+    # the current posture is answered in place, and the move again is a step of confirm_step
+    # rad per joint; 0: go back to the posture, then a usual move.
+    confirm_step: float = 0.0
+    confirm_near: float = 0.0
     period: float = 0.01  # s between the generator's updates
 
 
@@ -309,6 +314,8 @@ def validate_scenario(s: Scenario) -> None:
            and m.confirm_hold >= 0,
            "motion: max_speed, min_duration and period must be > 0, dwell and confirm_hold "
            ">= 0")
+    _check(m.confirm_step >= 0 and m.confirm_near >= 0,
+           "motion: confirm_step and confirm_near must be >= 0")
     w = s.wrench_sensor
     _check(w.rate > 0 and w.force_noise >= 0 and w.torque_noise >= 0,
            "wrench_sensor: rate must be > 0 and noise >= 0")

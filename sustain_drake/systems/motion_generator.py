@@ -7,11 +7,11 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 # Layout of the discrete state vector (n = number of joints); see MotionGenerator.
 (_T0, _DURATION, _SEGMENT, _KIND, _PAUSE_ID, _CONFIRM_ID, _CONFIRM_JOINT,
- _PAUSE_LEFT) = range(8)
-_HEADER = 8
+ _PAUSE_LEFT, _CONFIRM_PENDING) = range(9)
+_HEADER = 9
 # Segment kinds: a babbling move, a rest, the move back to a posture to confirm, braking, the
-# rest at that posture before the confirming move.
-_MOVE, _HOLD, _RETURN, _BRAKE, _CONFIRM_REST = 0.0, 1.0, 2.0, 3.0, 4.0
+# rest at that posture before the confirming move, a confirming step.
+_MOVE, _HOLD, _RETURN, _BRAKE, _CONFIRM_REST, _STEP = 0.0, 1.0, 2.0, 3.0, 4.0, 5.0
 # Peak deceleration when a pause interrupts a move, rad/s^2.
 _BRAKE_ACCELERATION = 3.0
 # A confirming single-joint move covers at least this fraction of the joint's range.
@@ -68,16 +68,31 @@ class MotionGenerator(LeafSystem):
       change can be attributed to that joint, or a usual random move when ``joint < 0`` (the
       paper's confirming motion after a coincidence).
 
+    Quick confirming trials (both off by default): with ``confirm_near`` > 0, a request whose
+    ``q`` is within ``confirm_near`` (rad, max-norm) of the current posture is answered where
+    the arm is: it brakes (or finishes its confirming step) and rests there ``confirm_hold``
+    s, counting the rest it already had, instead of moving back. With ``confirm_step`` > 0,
+    the move again is a short step of ``confirm_step`` rad per joint (only ``joint`` if
+    ``joint >= 0``), towards ``q`` for a joint more than half a step from it, and otherwise the
+    way that joint moved when the request came (the move whose start raised it; seeded random
+    if it was still), so the steps go out and back and the arm stays within 1.5 steps of
+    ``q``, at the pace
+    (``min_duration`` at least); after it the arm rests ``confirm_hold`` s, waiting for the
+    next request, then babbles on. A body detector can so test its candidate cells every
+    ``step + hold`` seconds (:mod:`sustain_drake.perception.coincidence`).
+
     Every segment starts from the current desired position and velocity, so requests never
     make the desired state jump. Ids start at 0, so the first request uses 1. Unconnected
     inputs are ignored. The state is a discrete vector (segment start time, duration, index
-    and kind, last request ids, pause time left, segment start posture, goal and start
-    velocity), updated every ``period`` s.
+    and kind, last request ids, pause time left, a confirm pending flag, segment start
+    posture, goal and start velocity, the confirm posture and step direction), updated every
+    ``period`` s.
     """
 
     def __init__(self, lower, upper, initial_posture, seed: int = 0, max_speed: float = 0.5,
                  min_duration: float = 1.0, dwell: float = 0.0, period: float = 0.01,
-                 confirm_hold: float = 0.5):
+                 confirm_hold: float = 0.5, confirm_step: float = 0.0,
+                 confirm_near: float = 0.0):
         super().__init__()
         self._lower = np.asarray(lower, dtype=float)
         self._upper = np.asarray(upper, dtype=float)
@@ -89,9 +104,9 @@ class MotionGenerator(LeafSystem):
                 and np.all(self._lower <= self._upper) and np.all(np.isfinite(q_init))):
             raise ValueError("joint ranges must be finite with lower <= upper")
         if not (max_speed > 0 and min_duration > 0 and dwell >= 0 and period > 0
-                and confirm_hold >= 0):
-            raise ValueError("max_speed, min_duration, period must be > 0, dwell and "
-                             "confirm_hold >= 0")
+                and confirm_hold >= 0 and confirm_step >= 0 and confirm_near >= 0):
+            raise ValueError("max_speed, min_duration, period must be > 0, dwell, "
+                             "confirm_hold, confirm_step and confirm_near >= 0")
         self._n = n
         self._seed = int(seed)
         self._period = float(period)
@@ -99,10 +114,12 @@ class MotionGenerator(LeafSystem):
         self._min_duration = float(min_duration)
         self._dwell = float(dwell)
         self._confirm_hold = float(confirm_hold)
+        self._confirm_step = float(confirm_step)
+        self._confirm_near = float(confirm_near)
         q_init = np.clip(q_init, self._lower, self._upper)
 
         # Start with a first move from the initial posture (segment 0 -> goal 0).
-        x0 = np.zeros(_HEADER + 3 * n)
+        x0 = np.zeros(_HEADER + 5 * n)
         goal = self._goal(0)
         x0[_DURATION] = self._move_duration(q_init, goal)
         x0[_SEGMENT] = 1
@@ -134,6 +151,22 @@ class MotionGenerator(LeafSystem):
             goal[j] = hi if hi - q[j] >= q[j] - lo else lo  # the farther end
         return goal
 
+    def _step_goal(self, q: np.ndarray, q_ref: np.ndarray, direction: np.ndarray, joint: int,
+                   k: int) -> np.ndarray:
+        """A confirming step from ``q``: ``confirm_step`` per joint (only ``joint`` if >= 0),
+        towards ``q_ref`` where a joint is more than half a step away, else along
+        ``direction`` (signs; 0: seeded random); within the ranges."""
+        d = self._confirm_step
+        random = np.where(np.random.default_rng([self._seed, k, 1]).random(self._n) < 0.5,
+                          -1.0, 1.0)
+        sign = np.where(direction != 0, np.sign(direction), random)
+        off = q - q_ref
+        sign = np.where(np.abs(off) > d / 2, -np.sign(off), sign)
+        goal = q + d * sign
+        if joint >= 0:
+            goal = np.where(np.arange(self._n) == joint, goal, q)
+        return np.clip(goal, self._lower, self._upper)
+
     def _move_duration(self, q0: np.ndarray, q1: np.ndarray) -> float:
         return max(self._min_duration,
                    _PEAK_OVER_MEAN * float(np.max(np.abs(q1 - q0))) / self._max_speed)
@@ -141,7 +174,7 @@ class MotionGenerator(LeafSystem):
     def _desired(self, x: np.ndarray, t: float):
         n, h = self._n, _HEADER
         return quintic(x[h:h + n], x[h + n:h + 2 * n], x[_DURATION], t - x[_T0],
-                       x[h + 2 * n:])
+                       x[h + 2 * n:h + 3 * n])
 
     def _calc_desired(self, context, output) -> None:
         x = context.get_discrete_state(self._state).get_value()
@@ -154,7 +187,7 @@ class MotionGenerator(LeafSystem):
         x[_T0], x[_DURATION], x[_KIND] = t, duration, kind
         x[h:h + n] = q0
         x[h + n:h + 2 * n] = q1
-        x[h + 2 * n:] = 0.0 if v0 is None else v0
+        x[h + 2 * n:h + 3 * n] = 0.0 if v0 is None else v0
 
     def _brake(self, x: np.ndarray, t: float, q, v) -> None:
         """Stop smoothly from (q, v): the quintic from v to rest with goal q + v T / 2 has a
@@ -163,6 +196,33 @@ class MotionGenerator(LeafSystem):
         stop = np.clip(q + v * duration / 2, self._lower, self._upper)
         self._start(x, t, q, stop, duration, _BRAKE, v)
 
+    def _confirm_request(self, x: np.ndarray, t: float, q_now, v_now, request) -> None:
+        """A new confirm request: back to its posture, or (``confirm_near``) rest where the
+        arm is."""
+        x[_CONFIRM_ID] = request[0]
+        x[_CONFIRM_JOINT] = int(request[1]) if 0 <= request[1] < self._n else -1
+        target = np.clip(request[2:], self._lower, self._upper)
+        n = self._n
+        x[_HEADER + 3 * n:_HEADER + 4 * n] = target    # the steps' reference posture
+        # The steps go out the way the arm was moving when the request came (the motion whose
+        # start coincided with the candidate cells' onsets), and back.
+        x[_HEADER + 4 * n:] = np.sign(v_now) if np.any(v_now != 0) else x[_HEADER + 4 * n:]
+        x[_CONFIRM_PENDING] = 0.0
+        if not (self._confirm_near > 0
+                and np.max(np.abs(q_now - target)) <= self._confirm_near):
+            self._start(x, t, q_now, target, self._move_duration(q_now, target), _RETURN, v_now)
+            return
+        moving = t < x[_T0] + x[_DURATION] and x[_KIND] not in (_HOLD, _CONFIRM_REST)
+        if moving and x[_KIND] == _STEP:
+            x[_CONFIRM_PENDING] = 1.0              # finish the step, then rest and step again
+        elif moving:
+            self._brake(x, t, q_now, v_now)
+            x[_KIND] = _RETURN                     # braking ends in the confirming rest
+        else:
+            rested = t - x[_T0] if x[_KIND] in (_HOLD, _CONFIRM_REST) else 0.0
+            self._start(x, t, q_now, q_now, max(self._confirm_hold - rested, self._period),
+                        _CONFIRM_REST)
+
     def _update(self, context, discrete_state) -> None:
         x = context.get_discrete_state(self._state).get_value().copy()
         t = context.get_time()
@@ -170,12 +230,7 @@ class MotionGenerator(LeafSystem):
         if self._confirm.HasValue(context):
             request = self._confirm.Eval(context)
             if np.all(np.isfinite(request)) and request[0] != x[_CONFIRM_ID]:
-                x[_CONFIRM_ID] = request[0]
-                joint = int(request[1]) if 0 <= request[1] < self._n else -1
-                x[_CONFIRM_JOINT] = joint
-                target = np.clip(request[2:], self._lower, self._upper)
-                self._start(x, t, q_now, target, self._move_duration(q_now, target), _RETURN,
-                            v_now)
+                self._confirm_request(x, t, q_now, v_now, request)
                 discrete_state.set_value(self._state, x)
                 return
         if self._pause.HasValue(context):
@@ -189,7 +244,21 @@ class MotionGenerator(LeafSystem):
         if t < x[_T0] + x[_DURATION]:
             return
         k = int(x[_SEGMENT])
-        if x[_KIND] == _BRAKE:
+        n = self._n
+        if x[_KIND] == _STEP and x[_CONFIRM_PENDING] > 0:
+            x[_CONFIRM_PENDING] = 0.0
+            self._start(x, t, q_now, q_now, max(self._confirm_hold, self._period), _CONFIRM_REST)
+        elif x[_KIND] == _STEP:
+            # Rest, waiting for a follow-up request (answered in place), then babble on.
+            self._start(x, t, q_now, q_now, max(self._confirm_hold, self._period), _HOLD)
+        elif x[_KIND] in (_RETURN, _CONFIRM_REST) and self._confirm_step > 0 and not (
+                x[_KIND] == _RETURN and self._confirm_hold > 0):
+            h = _HEADER
+            goal = self._step_goal(q_now, x[h + 3 * n:h + 4 * n], x[h + 4 * n:],
+                                   int(x[_CONFIRM_JOINT]), k)
+            x[_SEGMENT] = k + 1
+            self._start(x, t, q_now, goal, self._move_duration(q_now, goal), _STEP)
+        elif x[_KIND] == _BRAKE:
             self._start(x, t, q_now, q_now, x[_PAUSE_LEFT], _HOLD)
         elif x[_KIND] == _MOVE and self._dwell > 0:
             self._start(x, t, q_now, q_now, self._dwell, _HOLD)
