@@ -84,6 +84,28 @@ def test_the_sensor_noise_floors_the_allowable_error():
     assert state[coordination.MODE] == coordination.OBSERVE
 
 
+def test_a_refinement_is_adopted_in_observe_only_when_the_rule_says_so():
+    """``adopt_refinements``: a converged solution with a higher refinement counter replaces the
+    adopted one in OBSERVE (a REFINED event, sigma recomputed, the mode stays); the paper's rule
+    (the default) keeps the model fixed."""
+    for adopt in (True, False):
+        rule = CoordinationRule(adopt_refinements=adopt)
+        state, _ = coordination.step(coordination.initial_state(), rule, 0.0, True, 4e-6, 1, 0.0)
+        state, _ = coordination.step(state, rule, 0.1, True, 4e-6, 2, 5e-4)  # one violation
+        state, event = coordination.step(state, rule, 0.2, True, 1e-6, 3, 0.0, refinement=1)
+        assert state[coordination.MODE] == coordination.OBSERVE
+        if adopt:
+            assert event.kind == coordination.REFINED and event.time == pytest.approx(0.2)
+            assert state[coordination.SIGMA] == pytest.approx(1e-4) and state[coordination.VIOLATIONS] == 0
+            # The same refinement again, or a solution that is not converged: nothing.
+            state, event = coordination.step(state, rule, 0.3, True, 1e-6, 4, 0.0, refinement=1)
+            assert event is None
+            state, event = coordination.step(state, rule, 0.4, False, 1e-6, 5, 0.0, refinement=2)
+            assert event is None
+        else:
+            assert event is None and state[coordination.SIGMA] == pytest.approx(4e-4)
+
+
 def test_rule_validation():
     with pytest.raises(ValueError, match="noise_rms"):
         CoordinationRule(noise_rms=-1e-3)

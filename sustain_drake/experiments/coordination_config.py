@@ -31,6 +31,7 @@ class CoordinationConfig:
     max_consecutive_violations: int = _RULE.max_consecutive_violations
     pause_after_convergence: float = _RULE.pause_after_convergence
     noise_rms: float = _RULE.noise_rms
+    adopt_refinements: bool = _RULE.adopt_refinements
 
     def criteria(self, has_rotation: bool = True) -> ConvergenceCriteria:
         return ConvergenceCriteria(
@@ -44,4 +45,5 @@ class CoordinationConfig:
             max_consecutive_violations=self.max_consecutive_violations,
             pause_after_convergence=self.pause_after_convergence,
             noise_rms=self.noise_rms,
+            adopt_refinements=self.adopt_refinements,
         )

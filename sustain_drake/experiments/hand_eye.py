@@ -42,7 +42,7 @@ from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 # Logged signals: (system key, output port).
 _LOGGED = (("candidates", "eigenvalues"), ("candidates", "ssd"), ("candidates", "observation"),
            ("candidates", "expected_mse"), ("state_machine", "mode"), ("state_machine", "allowable_error"),
-           ("station", "true_p_HP"))
+           ("state_machine", "adopted_x"), ("station", "true_p_HP"))
 _POSES = ("true_X_WC", "X_WH")
 
 
@@ -233,6 +233,12 @@ def evaluate(handle, diagram, context) -> dict:
         reconv = [t for t in convergences if d["detected_s"] is not None and t > d["detected_s"]]
         d["reconverged_s"] = reconv[0] if reconv else None
         d["reconvergence_after_detection_s"] = None if not reconv else reconv[0] - d["detected_s"]
+    # The model in use (adopted, and refined while observing when the rule adopts refinements)
+    # just before each disturbance and at the end: what the robot works with.
+    t_x, x_log = _log(handle, diagram, context, "adopted_x")
+    for d in disturbances:
+        d["model_in_use_before"] = _camera_errors(t_x, x_log, t_pose, X_WC_log, d["time_s"] - 0.1)
+    refinements = [e.time for e in events if e.kind == coordination.REFINED]
     false_alarms = [t for t in detections
                     if not any(0.0 <= t - d["time_s"] <= config.false_alarm_window for d in disturbances)]
     first = adopted[0] if adopted else None
@@ -248,7 +254,20 @@ def evaluate(handle, diagram, context) -> dict:
         "first_convergence_after_adopted_feature_found_s": (
             None if first is None else first["time_s"] - first["candidate_found_s"]),
         "observed_fraction": _observed_fraction(handle, diagram, context),
+        "refinement_times_s": refinements,
+        "model_in_use_at_end": _camera_errors(t_x, x_log, t_pose, X_WC_log, float(t_x[-1])),
     }
+
+
+def _camera_errors(t_x, x_log, t_pose, X_WC_log, t: float) -> dict | None:
+    """The camera error of the adopted ``x`` logged at ``t`` (None before any adoption)."""
+    x = _at(t_x, x_log, t)
+    if not np.any(x):
+        return None
+    X_WC = _at(t_pose, X_WC_log, t).reshape(4, 4)
+    R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
+    return {"time_s": t, "camera_position_error_mm": 1e3 * float(np.linalg.norm(p_WC - X_WC[:3, 3])),
+            "camera_rotation_error_deg": math.degrees(rotation_angle(R_WC.T @ X_WC[:3, :3]))}
 
 
 def _single_point_errors(identifier: EyeToHandIdentifier, X_WC: np.ndarray) -> dict:

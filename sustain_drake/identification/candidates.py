@@ -102,6 +102,13 @@ class CandidateParams:
             constraint on the camera) for the joint refinement, the most samples first.
         max_observers: consistent points observed besides the observed point and its witness
             (``_observe``; 0: the observed point and witness only).
+        refine_interval: s; > 0: while observing, every tracked candidate whose sample the
+            adopted model explains (its own ``p_HP``, within the allowable error) keeps being fed,
+            and every ``refine_interval`` s the adopted camera is refined jointly with them
+            (``_joint_refined``) and offered as a refinement (``refined_solution``, counter
+            ``refinement``; a state machine with ``adopt_refinements`` adopts it). The model then
+            keeps learning from the poses the arm reaches after the first identification
+            (0: the paper's fixed model).
         pose_tolerance: s, how far the nearest hand pose may be from a frame's capture time.
     """
 
@@ -125,6 +132,7 @@ class CandidateParams:
     joint_min_samples: int = 30
     max_archived: int = 16
     max_observers: int = 0
+    refine_interval: float = 0.0
 
     def __post_init__(self):
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
@@ -132,6 +140,8 @@ class CandidateParams:
             raise ValueError(f"observe_min_samples and primary_failures must be >= 1 ({self})")
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
+        if not (self.refine_interval >= 0 and math.isfinite(self.refine_interval)):
+            raise ValueError(f"refine_interval must be >= 0, got {self.refine_interval}")
         for name in ("max_hand_radius", "gate_margin", "max_lost_time", "max_unconverged_time",
                      "reacquire_radius", "pose_tolerance", "reject_rms", "observation_jump",
                      "min_rotation_spread"):
@@ -210,6 +220,10 @@ class CandidateBank:
     previous_x: np.ndarray | None = None  # the model abandoned at the last reset (Eq. (36))
     archive: tuple = ()  # candidates whose track ended, kept for the joint refinement
     observers: tuple = ()  # extra observed points: (feature_id, p_HP, (p_CP, X_WH) of the last frame)
+    refined_solution: EyeToHandSolution | None = None  # the latest refinement of the adopted model
+    refinement: int = 0  # refinements offered since construction (never reset)
+    sample_errors: tuple = ()  # this frame's s_t of the observed point and its witness (m^2)
+    last_refinement: float = -math.inf  # s
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -312,7 +326,7 @@ def step(
                        last_reset=float(reset), round_start=math.nan,
                        observed_last=None, observed_p_HP=None,
                        witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
-                       observers=())
+                       observers=(), refined_solution=None, last_refinement=-math.inf)
     bank = record_pose(bank, time, X_WH)
     if not frame_time > bank.last_frame:
         return bank  # no new frame (or none yet)
@@ -338,7 +352,9 @@ def step(
         if k is None and not is_leader:
             archive.append(c)  # no longer tracked: gone for good (ids are never reused)
             continue
-        if k is not None and usable[k] and (searching or is_leader):
+        learning = (not searching and params.refine_interval > 0 and k is not None and usable[k]
+                    and _fits(c, p_CP[k], X_frame, reference_x, allowable_error))
+        if k is not None and usable[k] and (searching or is_leader or learning):
             num = c.solution.num_samples
             c = _feed(c, params, criteria, frame_time, p_CP[k], X_frame, forgetting_factor,
                       refine=is_leader)
@@ -415,8 +431,48 @@ def step(
                    observed_p_HP=bank.observed_p_HP if leader == bank.leader else None,
                    witness=bank.witness if leader == bank.leader else -1,
                    adopted_mse=adopted_mse)
+    if leader != bank.leader:
+        bank = replace(bank, refined_solution=None, last_refinement=float(frame_time))
+    elif (leader >= 0 and params.refine_interval > 0 and x_is_set(reference_x)
+          and frame_time - bank.last_refinement >= params.refine_interval):
+        bank = _refine_adopted(bank, params, reference_x, float(frame_time))
     return _observe(bank, params, frame_time, X_frame, ids, p_CP, usable, on_body | in_body_cell, row,
                     reference_x, allowable_error)
+
+
+def _fits(c: Candidate, p_CP, X_WH, reference_x, allowable_error: float) -> bool:
+    """Whether the adopted model (its camera, the candidate's own best ``p_HP``) explains this
+    sample of the candidate within the allowable error."""
+    if not (x_is_set(reference_x) and math.isfinite(allowable_error)) or c.solution.num_samples < 1:
+        return False
+    R_WC, p_WC = reference_x[0:9].reshape(3, 3, order="F"), reference_x[9:12]
+    p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
+    return _error(p_CP, X_WH, pack_x(R_WC, p_WC, p_HP)) <= allowable_error
+
+
+def _refine_adopted(bank: CandidateBank, params: CandidateParams, reference_x, time: float) -> CandidateBank:
+    """``refine_interval``: the adopted camera refined jointly with the leader and every candidate
+    it explains (``_joint_refined`` from the adopted camera), offered as a converged solution with
+    the next ``refinement`` counter; unchanged when no other point joins."""
+    bank = replace(bank, last_refinement=time)
+    leader = bank.find(bank.leader)
+    if leader is None:
+        return bank
+    R_WC, p_WC = reference_x[0:9].reshape(3, 3, order="F"), reference_x[9:12].copy()
+    p_HP = best_p_HP_given_camera(leader.statistic, R_WC, p_WC)
+    x = pack_x(R_WC, p_WC, p_HP)
+    mse = mean_squared_error_of(leader.statistic, x)
+    start = EyeToHandEstimate(R_WC, p_WC, p_HP, x, mse)
+    seed = replace(leader, solution=replace(leader.solution, projected=start, refined=start,
+                                            expected_mse=max(mse, bank.adopted_mse)))
+    refined, num_points = _joint_refined(seed, bank.candidates, bank.archive, params)
+    if num_points < 2:
+        return bank
+    estimate = refined.solution.estimate
+    verdict = Verdict(True, f"the adopted model refined jointly with {num_points - 1} other points")
+    solution = replace(refined.solution, expected_mse=estimate.mean_squared_error, verdict=verdict,
+                       refinement=bank.refinement + 1)
+    return replace(bank, refined_solution=solution, refinement=bank.refinement + 1)
 
 
 def _archived(archive: list, params: CandidateParams) -> list:
@@ -519,11 +575,11 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
              allowable_error=math.inf) -> CandidateBank:
     """``_observe_primary`` (the observed point and its witness), then the extra observers
     (``params.max_observers``): every consistent point tracked now gives its own ``s_t`` under the
-    adopted camera with its own ``p_HP``, and the reported ``s_t`` is the smallest of all. A change
-    of the body (a slipped tool, a moved camera) moves every point of the hand, a tracking failure
-    one; and while the observed point is lost (its face turned away, or its track ended in the
-    change itself) the observers keep the observation going, so a change is not missed for want of
-    the one point the paper observes."""
+    adopted camera with its own ``p_HP``, and the reported ``s_t`` is the lower median of all of
+    them (observed point, witness, observers). A change of the body (a slipped tool, a moved
+    camera) moves every point of the hand, a tracking failure one; and while the observed point is
+    lost (its face turned away, or its track ended in the change itself) the observers keep the
+    observation going, so a change is not missed for want of the one point the paper observes."""
     before = bank.sample_count
     bank = _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
                             allowable_error)  # fmt: skip
@@ -546,17 +602,24 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     if len(observers) < params.max_observers:
         taken = {o[0] for o in observers} | {bank.observed, bank.witness}
         options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=tuple(taken))
-        for _, feature_id, p_HP, k in sorted(options, key=lambda o: o[0]):
+        # Nearest in H to the observed point first (as the witness): on the same part of the tool,
+        # so that a slip of the tool moves them too (a point of the gripper would not move).
+        p_observed = bank.observed_p_HP if bank.observed_p_HP is not None else np.asarray(reference_x)[12:15]
+        for _, feature_id, p_HP, k in sorted(options, key=lambda o: float(np.linalg.norm(o[2] - p_observed))):
             if len(observers) >= params.max_observers:
                 break
             observers.append((feature_id, p_HP, (p_CP[k].copy(), X_WH)))
     bank = replace(bank, observers=tuple(observers))
+    if bank.sample_count > before:  # the observed point (or its witness) gave a sample too
+        errors = errors + list(bank.sample_errors)
     if not errors:
         return bank
-    smallest = min(errors)
-    if bank.sample_count > before:  # the observed point (or its witness) gave a sample too
-        return replace(bank, sample_error=min(bank.sample_error, smallest))
-    return replace(bank, sample_count=bank.sample_count + 1, sample_error=smallest)
+    errors = sorted(e if math.isfinite(e) else math.inf for e in errors)
+    # The lower median: one point (the smallest of two) is the paper's; with three or more, a
+    # point that fails alone (a track that slid, a point re-acquired near the prediction by
+    # chance) moves it neither up nor down.
+    reported = errors[(len(errors) - 1) // 2]
+    return replace(bank, sample_count=before + 1, sample_error=reported)
 
 
 def _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
@@ -588,19 +651,20 @@ def _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, ref
     if bank.witness < 0 or bank.witness not in row:
         bank = _choose_witness(bank, params, row, usable, x, (p_CP, X_WH))
     w = _gated_row(bank.witness, bank.witness_last, row, p_CP, X_WH, params) if bank.witness >= 0 else None
-    reported, failures = error, 0
+    reported, failures, errors = error, 0, (error,)
     if w is not None and usable[w]:
         x_w = x.copy()
         x_w[12:15] = bank.witness_p_HP
         witness_error = _error(p_CP[w], X_WH, x_w)
         bank = replace(bank, witness_last=(p_CP[w].copy(), X_WH))
         reported = min(error, witness_error)
+        errors = (error, witness_error)
         if error > allowable_error >= witness_error:
             failures = bank.primary_failures + 1
     elif w is None and bank.witness >= 0:
         bank = replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
     bank = replace(bank, sample_count=bank.sample_count + 1, primary_failures=failures,
-                   sample_error=reported if math.isfinite(reported) else math.inf)
+                   sample_error=reported if math.isfinite(reported) else math.inf, sample_errors=errors)
     if failures >= params.primary_failures:
         bank = replace(bank, observed=bank.witness, observed_p_HP=bank.witness_p_HP,
                        observed_last=bank.witness_last, witness=-1, witness_p_HP=None,

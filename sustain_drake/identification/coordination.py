@@ -15,6 +15,11 @@ compared with ``sigma``; after ``max_consecutive_violations`` consecutive sample
 paper: 10) a change of the body is declared, the identifier's statistic is reset and the mode
 goes back to IDENTIFY. A sample within the limit clears the count.
 
+Beyond the paper (``adopt_refinements``): in OBSERVE, an identifier may offer a refinement of the
+adopted model (its solution's ``refinement`` counter goes up: more samples of the same body, each
+within the allowable error of the adopted model); it is adopted in place, with the allowable error
+recomputed, and the mode stays OBSERVE. The paper fixes the model until a change is detected.
+
 The state is a small flat vector (``CoordinationState``) so that a Drake system can hold it in its
 context; ``step`` is a pure function of it.
 """
@@ -32,6 +37,7 @@ MODE_NAMES = {IDENTIFY: "IDENTIFY", OBSERVE: "OBSERVE"}
 
 CONVERGED = "converged"
 CHANGE_DETECTED = "change_detected"
+REFINED = "refined"
 
 
 @dataclass(frozen=True)
@@ -43,6 +49,8 @@ class CoordinationRule:
         noise_rms: the per-sample RMS residual of the sensor's noise alone, in the formulation's
             residual units (m for eye-to-hand); the floor under the expected mean squared error
             (0: none, the paper's rule).
+        adopt_refinements: in OBSERVE, adopt the identifier's refinements of the adopted model
+            (see the module docstring; False: the paper's fixed model).
         max_consecutive_violations: this many consecutive samples over ``sigma`` is a change
             (paper: 10; so 9 do nothing).
         pause_after_convergence: seconds the motion pauses after a convergence (paper: 3 s).
@@ -52,6 +60,7 @@ class CoordinationRule:
     max_consecutive_violations: int = 10
     pause_after_convergence: float = 3.0
     noise_rms: float = 0.0
+    adopt_refinements: bool = False
 
     def __post_init__(self):
         if not (self.noise_rms >= 0 and math.isfinite(self.noise_rms)):
@@ -67,8 +76,9 @@ class CoordinationRule:
 
 
 # Layout of the state vector.
-MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE = range(9)
-STATE_SIZE = 9
+(MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE,
+ REFINEMENT) = range(10)
+STATE_SIZE = 10
 
 
 def allowable_error(rule: CoordinationRule, expected_mse: float) -> float:
@@ -102,6 +112,7 @@ def step(
     sample_count: int,
     sample_error: float,
     num_samples: int | None = None,
+    refinement: int = 0,
 ) -> tuple[np.ndarray, Event | None]:
     """One tick of the rule. Returns the new state (a copy) and the event it decided, if any.
 
@@ -118,6 +129,8 @@ def step(
             detection the identifier applies the reset one update later, so for a tick or two it
             still shows the old (converged) solution; a solution is only taken as the new
             identification when it has no more samples than arrived since the detection.
+        refinement: the solution's refinement counter (``adopt_refinements``): in OBSERVE, a
+            converged solution with a higher counter than the adopted one is a refinement of it.
     """
     new = state.copy()
     new_sample = sample_count != int(state[LAST_SAMPLE])
@@ -130,8 +143,15 @@ def step(
             new[SIGMA] = allowable_error(rule, expected_mse)
             new[PAUSE_ID] += 1
             new[CONVERGENCES] += 1
+            new[REFINEMENT] = refinement
             return new, Event(time, CONVERGED, f"allowable error {new[SIGMA]:.3g}")
         return new, None
+    refined = refinement > state[REFINEMENT] and converged and math.isfinite(expected_mse)
+    if rule.adopt_refinements and refined:
+        new[REFINEMENT] = refinement
+        new[SIGMA] = allowable_error(rule, expected_mse)
+        new[VIOLATIONS] = 0
+        return new, Event(time, REFINED, f"allowable error {new[SIGMA]:.3g}")
     if not new_sample:
         return new, None
     if sample_error > state[SIGMA] or not math.isfinite(sample_error):

@@ -97,6 +97,8 @@ class EyeToHandSolution(SolutionProperties):
         refined: the Gauss-Newton refinement of ``projected`` (None if not asked for).
         verdict: the convergence verdict from all three criteria.
         num_samples: samples behind this solution.
+        refinement: 0 for an identification; counts the refinements of an adopted model in
+            OBSERVE (``coordination.CoordinationRule.adopt_refinements``).
     """
 
     num_unknowns: ClassVar[int] = N_UNKNOWNS
@@ -109,6 +111,7 @@ class EyeToHandSolution(SolutionProperties):
     refined: EyeToHandEstimate | None
     verdict: Verdict
     num_samples: int
+    refinement: int = 0
 
     @property
     def estimate(self) -> EyeToHandEstimate | None:

@@ -174,6 +174,8 @@ class CandidateIdentifiers(LeafSystem):
             return self._empty
         if bank.leader < 0 and shown.solution.verdict.converged:
             return dataclasses.replace(shown.solution, verdict=Verdict(False, "no leader chosen yet"))
+        if bank.leader >= 0 and bank.refined_solution is not None:
+            return bank.refined_solution  # the adopted model, refined while observing
         return shown.solution
 
     def _update(self, context, state) -> None:

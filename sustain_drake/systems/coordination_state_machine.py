@@ -39,7 +39,8 @@ class CoordinationStateMachine(LeafSystem):
     squared residual units; 0 before); ``reset`` (1, a counter: connect to the identifier's
     ``reset``, which clears its statistic when the count changes); ``pause`` (2,
     ``[request_id, seconds]``: connect to the motion generator's ``pause``); ``events`` (a tuple
-    of ``coordination.Event``: every convergence and change detection with its time).
+    of ``coordination.Event``: every convergence, change detection and, with the rule's
+    ``adopt_refinements``, adopted refinement, with its time).
 
     Every ``period`` seconds (a periodic unrestricted update, at the identifier's rate) it applies
     ``coordination.step``, with the solution's ``num_samples``: after a change detection, a solution
@@ -104,10 +105,11 @@ class CoordinationStateMachine(LeafSystem):
         new, event = coordination.step(
             self._vector(context), self._rule, context.get_time(), solution.verdict.converged,
             solution.expected_mse, int(sample_count), float(sample_error), int(solution.num_samples),
+            int(getattr(solution, "refinement", 0)),
         )  # fmt: skip
         state.get_mutable_discrete_state(self._state).set_value(new)
         if event is not None:
             state.get_mutable_abstract_state(self._events).set_value(self.events(context) + (event,))
-            if event.kind == coordination.CONVERGED:
+            if event.kind in (coordination.CONVERGED, coordination.REFINED):
                 state.get_mutable_abstract_state(self._adopted).set_value(solution)
                 state.get_mutable_discrete_state(self._adopted_x).set_value(solution.x)
