@@ -89,7 +89,10 @@ def test_the_scenario_section_builds_the_rule_and_rejects_bad_values():
     assert config.feature_params().hits == 3
     scenario = load_scenario(SCENARIO)
     assert scenario.body_detection.enabled and scenario.duration == 60.0
-    assert scenario.body_detection.coincidence_params().trial_window == 0.15
+    rule = scenario.body_detection.coincidence_params()
+    assert rule.trial_window == 0.2 and rule.stop_requests and rule.max_sequence_trials == 6
+    assert scenario.body_detection.feature_params().flow_threshold_px == 0.5
+    assert (scenario.motion.confirm_step, scenario.motion.confirm_near) == (0.1, 0.2)
     scenario.body_detection.alpha = 2.0
     builder = DiagramBuilder()
     station = builder.AddSystem(build_station(scenario))

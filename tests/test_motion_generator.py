@@ -147,8 +147,8 @@ def test_quick_confirm_answers_in_place_with_steps_of_confirm_step():
     step, hold = 0.05, 0.2
     gen = MotionGenerator(LOWER, UPPER, START, seed=1, max_speed=0.5, min_duration=0.2,
                           confirm_hold=hold, confirm_step=step, confirm_near=0.1)
-    times_req = [0.0, 0.15, 0.45, 1.05]
-    values = [np.concatenate([[i, -1.0], START]) for i in range(4)]
+    times_req = [0.0, 0.15, 0.45, 1.05, 3.0]    # zero-order hold: id i from times_req[i]
+    values = [np.concatenate([[i, -1.0], START]) for i in (0, 1, 2, 3, 3)]
     times, x = run(gen, 3.0, confirm=(times_req, values))
     q, v = x[:, :3], x[:, 3:]
     moving = np.max(np.abs(v), axis=1) > 1e-9
@@ -157,7 +157,8 @@ def test_quick_confirm_answers_in_place_with_steps_of_confirm_step():
     window = times < 1.5
     assert np.max(np.abs(q[window] - START)) < 1.5 * step + 0.01
     # Moves start from rest: the first step after the hold at the braking posture, the next
-    # ones one step (0.2 s, min_duration) and one hold later.
+    # ones one step (0.2 s, min_duration) and one hold later (the third request comes 0.09 s
+    # into the rest after the second step: that rest counts).
     starts = times[1:][moving[1:] & ~moving[:-1]]
     starts = starts[starts > 0.1]             # after the first move's start at 0
     assert 0.15 + hold - 0.02 <= starts[0] <= 0.15 + hold + 0.08

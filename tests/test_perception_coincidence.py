@@ -328,3 +328,19 @@ def test_max_sequence_trials_ends_a_chain_of_follow_ups():
     assert limited.sequence_trials <= 2
     with pytest.raises(ValueError, match="max_sequence_trials"):
         CoincidenceParams(max_sequence_trials=-1)
+
+
+def test_stop_requests_test_the_cells_the_arm_swept_into_where_it_stops():
+    """The arm moves on samples 30-60; a cell starts moving mid-move (sample 45, no actuator
+    onset within τ_a before it: no coincidence) and stops with the arm. With stop_requests, a
+    request is raised once the arm has been still for quiet_a, at the posture where it rests."""
+    n = 75
+    act, vis = signal(n, (30, 60))[:, None], signal(n, (45, 61))[:, None]
+    plain = drive(act, vis)[-1]
+    assert plain.eps.sum() == 0 and plain.request_count == 0
+    states = drive(act, vis, CoincidenceParams(stop_requests=True))
+    s = states[-1]
+    assert s.request_count == 1 and s.candidates.tolist() == [1.0]
+    assert s.q_request[0] == pytest.approx(30 * 0.5 * DT)       # where the arm rests
+    first = next(k for k, st in enumerate(states) if st.request_count)
+    assert 60 + 2 <= first <= 60 + 4                             # quiet_a (0.1 s) after the stop

@@ -47,6 +47,7 @@ class BodyDetectionConfig:
     request_interval: float = _RULE.request_interval
     single_joint_confirm: bool = _RULE.single_joint_confirm
     max_sequence_trials: int = _RULE.max_sequence_trials
+    stop_requests: bool = _RULE.stop_requests
     # Body features: confirming-trial hits that make a tracked feature body, and the per-frame
     # flow (px) at or above which a feature moves (its onset "rises up from" below it).
     feature_hits: int = FeatureParams().hits
@@ -70,7 +71,7 @@ class BodyDetectionConfig:
             response_window=self.response_window, posture_tolerance=self.posture_tolerance,
             confirm_timeout=self.confirm_timeout, request_interval=self.request_interval,
             single_joint_confirm=self.single_joint_confirm,
-            max_sequence_trials=self.max_sequence_trials)
+            max_sequence_trials=self.max_sequence_trials, stop_requests=self.stop_requests)
 
     def feature_params(self) -> FeatureParams:
         return FeatureParams(hits=self.feature_hits, skip_known_cells=self.skip_feature_cells,

@@ -78,6 +78,10 @@ move were marked 1.5-2 s after their first motion):
   joints of the same move are tested in the same trial instead of waiting for a request of
   their own. Follow-up requests take only the cells that hit (the trial steps' onsets would
   let every busy cell in);
+- with ``stop_requests``, a request is also raised where the arm comes to rest (after a
+  babbling move), for the cells that moved during the last ``tau_s`` of its motion: the cells
+  the arm swept into mid-move had no onset coinciding with an actuator onset, so without it
+  they wait for the next move's start (after the rest) to raise a request;
 - ``max_sequence_trials`` ends a chain of follow-ups at one posture (a cell that hits about
   as often as it misses, e.g. one the steps move the arm in and out of, would hold the arm
   there forever), so the arm babbles on and shows the rest of the image.
@@ -139,6 +143,8 @@ class CoincidenceParams:
     request_interval: float = 0.0      # s: a new coincidence raises a request only this long
     #                                    after the last request ended (follow-ups at once), so
     #                                    the babbling explores between confirmations
+    stop_requests: bool = False        # also request a confirmation where the arm stops, for
+    #                                    the cells that moved during the last tau_s of its motion
     max_sequence_trials: int = 0       # trials in one sequence of follow-ups at a posture, after
     #                                    which the arm babbles on (0: no limit); a cell that
     #                                    hits about as often as it misses would hold it forever
@@ -414,7 +420,10 @@ def step(state: CoincidenceState, t: float, a: np.ndarray, sdot: np.ndarray,
     # A confirming trial is a new motion of the arm from rest: every actuator was still for
     # quiet_a before this sample (another joint's late onset in the same move is no trial).
     arm_rested = t - state.last_motion_a.max() > params.quiet_a
-    _confirm(s, t, onset_a & arm_rested, new, params, known)
+    # The arm has just come to rest (still for quiet_a now, not at the previous sample).
+    stopped = bool(t - s.last_motion_a.max() > params.quiet_a) and not bool(
+        state.t_prev - state.last_motion_a.max() > params.quiet_a)
+    _confirm(s, t, onset_a & arm_rested, new, params, known, stopped)
     return s
 
 
@@ -428,7 +437,7 @@ def _add_evidence(s: CoincidenceState, cells: np.ndarray, hit: bool, params: Coi
 
 
 def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray,
-             params: CoincidenceParams, known: np.ndarray):
+             params: CoincidenceParams, known: np.ndarray, stopped: bool = False):
     """Confirming motions: raise a request, recognise its trial, score hits and misses."""
     if s.request_active and not s.trial_active:
         # Pairs of the move that raised the request (its actuator onsets, up to the request),
@@ -490,6 +499,16 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             latest = acts[np.argmax(s.t_onset_a[acts])]
             s.sequence_trials = np.float64(0)
             _raise_request(s, t, trigger, s.q_onset[latest], params)
+        elif stopped and params.stop_requests:
+            # Where the arm stops: the cells that moved during the end of its motion (the
+            # arm's place now; their onsets, mid-move, coincided with no actuator onset),
+            # with the joints that were moving then, tested at the posture where it rests.
+            t_stop = s.last_motion_a.max()
+            cells = (s.last_motion_s >= t_stop - params.tau_s) & ~(s.body(params) | known)
+            acts = s.last_motion_a >= t_stop - params.tau_a
+            if cells.any():
+                s.sequence_trials = np.float64(0)
+                _raise_request(s, t, acts[:, None] & cells[None, :], s.a_prev, params)
 
 
 def _raise_request(s: CoincidenceState, t: float, pairs: np.ndarray, q: np.ndarray,

@@ -77,8 +77,9 @@ class MotionGenerator(LeafSystem):
     way that joint moved when the request came (the move whose start raised it; seeded random
     if it was still), so the steps go out and back and the arm stays within 1.5 steps of
     ``q``, at the pace
-    (``min_duration`` at least); after it the arm rests ``confirm_hold`` s, waiting for the
-    next request, then babbles on. A body detector can so test its candidate cells every
+    (``min_duration`` at least); after it the arm rests up to ``2 confirm_hold`` s, waiting for
+    the next request (which then moves it again ``confirm_hold`` after the step's end or at
+    once), then babbles on. A body detector can so test its candidate cells every
     ``step + hold`` seconds (:mod:`sustain_drake.perception.coincidence`).
 
     Every segment starts from the current desired position and velocity, so requests never
@@ -249,8 +250,10 @@ class MotionGenerator(LeafSystem):
             x[_CONFIRM_PENDING] = 0.0
             self._start(x, t, q_now, q_now, max(self._confirm_hold, self._period), _CONFIRM_REST)
         elif x[_KIND] == _STEP:
-            # Rest, waiting for a follow-up request (answered in place), then babble on.
-            self._start(x, t, q_now, q_now, max(self._confirm_hold, self._period), _HOLD)
+            # Rest, waiting for a follow-up request (answered in place, counting this rest),
+            # then babble on. Twice the hold: the detector decides on a follow-up only when
+            # the trial's response window has closed, and the arm lags its desired state.
+            self._start(x, t, q_now, q_now, max(2 * self._confirm_hold, self._period), _HOLD)
         elif x[_KIND] in (_RETURN, _CONFIRM_REST) and self._confirm_step > 0 and not (
                 x[_KIND] == _RETURN and self._confirm_hold > 0):
             h = _HEADER
