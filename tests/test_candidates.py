@@ -214,6 +214,9 @@ def test_a_lost_observed_point_hands_over_to_a_consistent_candidate():
     assert bank.leader == 9 and bank.observed == 4
     assert np.linalg.norm(bank.observed_p_HP - p4) < 3e-3
     assert bank.sample_error < 3e-5  # the hand-over point is observed with its own p_HP (1 mm noise)
+    # observe_radius: 4 is 5.4 cm from the adopted tool point; within 3 cm only, nobody takes over.
+    bank, _ = run(frames, reference=x_true, params=replace(HANDOVER, observe_radius=0.03))
+    assert bank.leader == 9 and bank.observed == -1
 
     def only_other_link(k, X, rng):
         if k >= 460:

@@ -102,6 +102,9 @@ class CandidateParams:
             constraint on the camera) for the joint refinement, the most samples first.
         max_observers: consistent points observed besides the observed point and its witness
             (``_observe``; 0: the observed point and witness only).
+        observe_radius: m; a witness, an observer or a hand-over must lie within this of the
+            adopted tool point in H (on the tool: a point of the gripper does not move when the
+            tool slips; inf: anywhere on the hand).
         refine_interval: s; > 0: while observing, every tracked candidate whose sample the
             adopted model explains (its own ``p_HP``, within the allowable error) keeps being fed,
             and every ``refine_interval`` s the adopted camera is refined jointly with them
@@ -133,6 +136,7 @@ class CandidateParams:
     max_archived: int = 16
     max_observers: int = 0
     refine_interval: float = 0.0
+    observe_radius: float = math.inf
 
     def __post_init__(self):
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
@@ -140,6 +144,8 @@ class CandidateParams:
             raise ValueError(f"observe_min_samples and primary_failures must be >= 1 ({self})")
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
+        if not self.observe_radius > 0:
+            raise ValueError(f"observe_radius must be positive, got {self.observe_radius}")
         if not (self.refine_interval >= 0 and math.isfinite(self.refine_interval)):
             raise ValueError(f"refine_interval must be >= 0, got {self.refine_interval}")
         for name in ("max_hand_radius", "gate_margin", "max_lost_time", "max_unconverged_time",
@@ -344,7 +350,9 @@ def step(
 
     # Candidates are fed while searching: before a leader exists, or when the observed point is
     # lost (a new point to observe). Otherwise the leader alone keeps feeding, the others are frozen.
-    searching = bank.leader < 0 or bank.observed < 0
+    # With observers (``max_observers``), candidates keep being found and fed while observing, so
+    # that fresh points consistent with the adopted model are at hand when observed points are lost.
+    searching = bank.leader < 0 or bank.observed < 0 or params.max_observers > 0
     kept, fed, archive = [], False, list(bank.archive)
     for c in bank.candidates:
         k = row.get(c.feature_id)
@@ -589,6 +597,7 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     if not x_is_set(x):
         return bank
     x = np.array(x, dtype=float)
+    x_adopted = x.copy()
     errors, observers = [], []
     for feature_id, p_HP, last in bank.observers:
         k = _gated_row(feature_id, last, row, p_CP, X_WH, params)
@@ -602,10 +611,7 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     if len(observers) < params.max_observers:
         taken = {o[0] for o in observers} | {bank.observed, bank.witness}
         options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=tuple(taken))
-        # Nearest in H to the observed point first (as the witness): on the same part of the tool,
-        # so that a slip of the tool moves them too (a point of the gripper would not move).
-        p_observed = bank.observed_p_HP if bank.observed_p_HP is not None else np.asarray(reference_x)[12:15]
-        for _, feature_id, p_HP, k in sorted(options, key=lambda o: float(np.linalg.norm(o[2] - p_observed))):
+        for _, feature_id, p_HP, k in _near_tool(options, x_adopted[12:15], params):
             if len(observers) >= params.max_observers:
                 break
             observers.append((feature_id, p_HP, (p_CP[k].copy(), X_WH)))
@@ -639,17 +645,18 @@ def _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, ref
     if not x_is_set(x):
         return bank
     x = np.array(x, dtype=float)
+    anchor = x[12:15].copy()  # the adopted tool point
     if bank.observed_p_HP is not None:
         x[12:15] = bank.observed_p_HP
     k = _gated_row(bank.observed, bank.observed_last, row, p_CP, X_WH, params)
     if k is None:
-        return _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x)
+        return _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x, anchor)
     if not usable[k]:
         return bank
     error = _error(p_CP[k], X_WH, x)
     bank = replace(bank, observed_last=(p_CP[k].copy(), X_WH))
     if bank.witness < 0 or bank.witness not in row:
-        bank = _choose_witness(bank, params, row, usable, x, (p_CP, X_WH))
+        bank = _choose_witness(bank, params, row, usable, x, (p_CP, X_WH), anchor)
     w = _gated_row(bank.witness, bank.witness_last, row, p_CP, X_WH, params) if bank.witness >= 0 else None
     reported, failures, errors = error, 0, (error,)
     if w is not None and usable[w]:
@@ -716,17 +723,27 @@ def _consistent(bank, params, row, usable, x, frame, exclude=()):
 _NOW_FACTOR = 10.0
 
 
-def _choose_witness(bank, params, row, usable, x, frame) -> CandidateBank:
+def _near_tool(options, anchor, params: CandidateParams) -> list:
+    """The consistent points (``_consistent``'s options) within ``observe_radius`` of the adopted
+    tool point ``anchor`` in H, nearest first: a change of the held tool moves only the tool's
+    points (a point of the gripper stays where the model puts it after the tool slipped)."""
+    near = [(float(np.linalg.norm(o[2] - anchor)), o) for o in options]
+    return [o for d, o in sorted(near, key=lambda n: n[0]) if d <= params.observe_radius]
+
+
+def _choose_witness(bank, params, row, usable, x, frame, anchor) -> CandidateBank:
     options = _consistent(bank, params, row, usable, x, frame, exclude=(bank.observed, bank.leader))
+    options = _near_tool(options, anchor, params)
     if not options:
         return replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
-    _, feature_id, p_HP, _ = min(options, key=lambda o: float(np.linalg.norm(o[2] - x[12:15])))
+    _, feature_id, p_HP, _ = options[0]
     return replace(bank, witness=feature_id, witness_p_HP=p_HP, witness_last=None)
 
 
-def _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x) -> CandidateBank:
+def _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x, anchor) -> CandidateBank:
     """A new observed point: a body feature where ``x`` puts the observed point (a new track of
-    the same point), else the most consistent candidate (with its own ``p_HP``), else none."""
+    the same point), else the consistent candidate nearest to it in H (with its own ``p_HP``),
+    else none."""
     near = np.flatnonzero(usable & body)
     if near.size:
         distance = np.linalg.norm(p_CP[near] - predicted_p_CP(x, X_WH), axis=1)
@@ -738,9 +755,12 @@ def _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x) -> Candidate
                 bank = replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
             return bank
     options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=(bank.observed,))
+    # The consistent point nearest in H to the adopted tool point: the observation stays on the
+    # tool (a chain of hand-overs must not drift onto the hand, which does not see the tool slip).
+    options = _near_tool(options, anchor, params)
     if not options:
         return replace(bank, observed=-1, observed_last=None)
-    _, feature_id, p_HP, k = min(options, key=lambda o: o[0])
+    _, feature_id, p_HP, k = options[0]
     witness = (dict(witness=-1, witness_p_HP=None, witness_last=None) if feature_id == bank.witness else {})
     return replace(bank, observed=feature_id, observed_p_HP=p_HP, observed_last=(p_CP[k].copy(), X_WH),
                    **witness)
