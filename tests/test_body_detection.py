@@ -91,6 +91,7 @@ def test_the_scenario_section_builds_the_rule_and_rejects_bad_values():
     assert scenario.body_detection.enabled and scenario.duration == 60.0
     rule = scenario.body_detection.coincidence_params()
     assert rule.trial_window == 0.2 and rule.stop_requests and rule.max_sequence_trials == 6
+    assert rule.skip_busy_cells
     assert scenario.body_detection.feature_params().flow_threshold_px == 0.5
     assert (scenario.motion.confirm_step, scenario.motion.confirm_near) == (0.1, 0.2)
     scenario.body_detection.alpha = 2.0
@@ -136,3 +137,4 @@ def test_evaluation_state_clones_with_the_context():
     assert evaluation.evaluator(evaluation.GetMyContextFromRoot(context)).frames > frames
     assert np.all(np.isfinite(evaluation.evaluator(
         evaluation.GetMyContextFromRoot(context)).to_vector()))
+

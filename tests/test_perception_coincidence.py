@@ -344,3 +344,20 @@ def test_stop_requests_test_the_cells_the_arm_swept_into_where_it_stops():
     assert s.q_request[0] == pytest.approx(30 * 0.5 * DT)       # where the arm rests
     first = next(k for k, st in enumerate(states) if st.request_count)
     assert 60 + 2 <= first <= 60 + 4                             # quiet_a (0.1 s) after the stop
+
+
+def test_skip_busy_cells_does_not_count_a_miss_for_a_cell_that_could_not_respond():
+    """Both cells respond to the move at sample 30 (one request, two candidates). At the trial
+    (a move at sample 60 from rest, near q*), cell 0 responds again but cell 1 has been moving
+    since sample 50 (a person walking through it): it cannot have an onset."""
+    n = 85                                     # the trial lasts 2 w = 0.6 s (18 samples)
+    act = signal(n, (30, 40), (60, 70))[:, None]
+    vis = np.stack([signal(n, (31, 40), (61, 70)), signal(n, (31, 40), (50, 85))], axis=1)
+    loose = dict(posture_tolerance=0.5)
+    plain = drive(act, vis, CoincidenceParams(**loose))[-1]
+    assert plain.trial_count == 1 and plain.misses[0].tolist() == [0.0, 1.0]
+    skip = drive(act, vis, CoincidenceParams(skip_busy_cells=True, **loose))[-1]
+    assert skip.trial_count == 1 and skip.misses[0].tolist() == [0.0, 0.0]
+    assert skip.hits[0].tolist() == [1.0, 0.0] and skip.evidence[1] == 0.0
+    # The follow-up tests cell 1 again (and cell 0, which hit).
+    assert skip.request_active == 1 and skip.candidates.tolist() == [1.0, 1.0]

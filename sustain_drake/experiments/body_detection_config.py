@@ -48,6 +48,7 @@ class BodyDetectionConfig:
     single_joint_confirm: bool = _RULE.single_joint_confirm
     max_sequence_trials: int = _RULE.max_sequence_trials
     stop_requests: bool = _RULE.stop_requests
+    skip_busy_cells: bool = _RULE.skip_busy_cells
     # Body features: confirming-trial hits that make a tracked feature body, and the per-frame
     # flow (px) at or above which a feature moves (its onset "rises up from" below it).
     feature_hits: int = FeatureParams().hits
@@ -71,7 +72,8 @@ class BodyDetectionConfig:
             response_window=self.response_window, posture_tolerance=self.posture_tolerance,
             confirm_timeout=self.confirm_timeout, request_interval=self.request_interval,
             single_joint_confirm=self.single_joint_confirm,
-            max_sequence_trials=self.max_sequence_trials, stop_requests=self.stop_requests)
+            max_sequence_trials=self.max_sequence_trials, stop_requests=self.stop_requests,
+            skip_busy_cells=self.skip_busy_cells)
 
     def feature_params(self) -> FeatureParams:
         return FeatureParams(hits=self.feature_hits, skip_known_cells=self.skip_feature_cells,

@@ -82,6 +82,10 @@ move were marked 1.5-2 s after their first motion):
   babbling move), for the cells that moved during the last ``tau_s`` of its motion: the cells
   the arm swept into mid-move had no onset coinciding with an actuator onset, so without it
   they wait for the next move's start (after the rest) to raise a request;
+- with ``skip_busy_cells``, a candidate that is moving when the trial starts (a person walking
+  through it) is not tested by that trial: it cannot have an onset, so a miss would be
+  counter-evidence against a body cell that could not respond; it is tested again by the
+  follow-up. The choice is made at the trial's start, from the past, like the candidates;
 - ``max_sequence_trials`` ends a chain of follow-ups at one posture (a cell that hits about
   as often as it misses, e.g. one the steps move the arm in and out of, would hold the arm
   there forever), so the arm babbles on and shows the rest of the image.
@@ -143,6 +147,9 @@ class CoincidenceParams:
     request_interval: float = 0.0      # s: a new coincidence raises a request only this long
     #                                    after the last request ended (follow-ups at once), so
     #                                    the babbling explores between confirmations
+    skip_busy_cells: bool = False      # a candidate moving when its trial starts (so it cannot
+    #                                    have an onset) is not tested: no hit, no miss; it stays
+    #                                    a candidate of the follow-up
     stop_requests: bool = False        # also request a confirmation where the arm stops, for
     #                                    the cells that moved during the last tau_s of its motion
     max_sequence_trials: int = 0       # trials in one sequence of follow-ups at a posture, after
@@ -220,6 +227,7 @@ _FIELDS = (
     ("evidence", lambda na, nc: (nc,)),       # L_j
     ("candidates", lambda na, nc: (nc,)),     # cells under test by the pending request
     ("trial_cells", lambda na, nc: (nc,)),    # cells tested by the latest trial (kept after it)
+    ("trial_testable", lambda na, nc: (nc,)),  # its candidates quiet at its start (could respond)
     ("eps", lambda na, nc: (na, nc)),         # ε_ij, Eq. (27)
     ("counted_ta", lambda na, nc: (na, nc)),  # onset pair last counted into ε_ij
     ("counted_ts", lambda na, nc: (na, nc)),
@@ -458,6 +466,8 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             s.sequence_trials += 1
             s.trial_until = np.float64(t + params.trial_window)
             s.trial_cells = s.candidates.copy()
+            quiet = (s.t_onset_s == t) | (t - s.last_motion_s > params.quiet_s)
+            s.trial_testable = (s.candidates > 0) & (quiet | (not params.skip_busy_cells))
             s.trial_moved[:] = 0
             s.trial_hit[:] = 0
         elif t - s.request_time > params.confirm_timeout:
@@ -465,7 +475,7 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             return
 
     if s.trial_active:
-        cand = s.candidates > 0
+        cand = (s.candidates > 0) & (s.trial_testable > 0)
         s.trial_moved = np.maximum(s.trial_moved, onset_a)
         trial_new = new & ((s.t_onset_a >= s.trial_t0)
                            & (t - s.t_onset_a <= params.trial_window + 1e-9))[:, None]
@@ -484,7 +494,8 @@ def _confirm(s: CoincidenceState, t: float, onset_a: np.ndarray, new: np.ndarray
             s.misses += tested_pairs & miss[None, :]
             # Cells that responded here and are not yet body are tested again at once, at the
             # same posture (a fast sequence of unselected trials).
-            follow = (s.trial_hit > 0) & ~(s.body(params) | known)[None, :]
+            untested = (s.cand_act > 0) & ~(s.trial_testable > 0)[None, :]
+            follow = ((s.trial_hit > 0) | untested) & ~(s.body(params) | known)[None, :]
             q = s.q_request.copy()
             _clear_request(s, t)
             limit = params.max_sequence_trials
