@@ -353,6 +353,7 @@ def step(
     # With observers (``max_observers``), candidates keep being found and fed while observing, so
     # that fresh points consistent with the adopted model are at hand when observed points are lost.
     searching = bank.leader < 0 or bank.observed < 0 or params.max_observers > 0
+    observing = bank.leader >= 0 and params.max_observers > 0 and x_is_set(reference_x)
     kept, fed, archive = [], False, list(bank.archive)
     for c in bank.candidates:
         k = row.get(c.feature_id)
@@ -374,6 +375,11 @@ def step(
             sol = c.solution
             too_long = frame_time - c.admitted > params.max_unconverged_time and not sol.verdict.converged
             misfit = sol.num_samples >= criteria.min_samples and not sol.expected_rms <= params.reject_rms
+            # While observing (with observers), a point the adopted camera does not explain is not
+            # of the hand (or not any more): its slot goes to a new point.
+            misfit = misfit or (observing and sol.num_samples >= params.observe_min_samples
+                                and rotation_spread(c.statistic) >= params.min_rotation_spread
+                                and not _explained(c, reference_x, bank.adopted_mse, params))
             if too_long or misfit:
                 rejected = rejected | {c.feature_id}
                 if too_long and not misfit:
@@ -386,8 +392,12 @@ def step(
     adopted_mse = bank.adopted_mse
     if searching:
         present = {c.feature_id for c in kept}
-        # Confirmed body features first, then features in body cells; oldest track first.
+        # Confirmed body features first, then features in body cells; oldest track first. While
+        # observing (with observers): nearest first to where the adopted model puts the tool point.
         order = np.lexsort((ids, ~on_body))
+        if observing:
+            tool_point = predicted_p_CP(np.asarray(reference_x), X_frame)
+            order = np.argsort(np.linalg.norm(p_CP - tool_point, axis=1))
         for k in order:
             if len(kept) >= params.max_candidates:
                 break
@@ -446,6 +456,15 @@ def step(
         bank = _refine_adopted(bank, params, reference_x, float(frame_time))
     return _observe(bank, params, frame_time, X_frame, ids, p_CP, usable, on_body | in_body_cell, row,
                     reference_x, allowable_error)
+
+
+def _explained(c: Candidate, x, adopted_mse: float, params: CandidateParams) -> bool:
+    """Whether the camera of ``x`` explains the candidate's samples (its own best ``p_HP``) within
+    ``observe_consistency`` times the adopted RMS error."""
+    R_WC, p_WC = np.asarray(x)[0:9].reshape(3, 3, order="F"), np.asarray(x)[9:12]
+    p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
+    mse = mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP))
+    return mse <= params.observe_consistency**2 * adopted_mse
 
 
 def _fits(c: Candidate, p_CP, X_WH, reference_x, allowable_error: float) -> bool:
