@@ -393,17 +393,20 @@ def step(
     if searching:
         present = {c.feature_id for c in kept}
         # Confirmed body features first, then features in body cells; oldest track first. While
-        # observing (with observers): nearest first to where the adopted model puts the tool point.
+        # observing (with observers), alternately the nearest to where the adopted model puts the
+        # tool point (the tool's points) and the oldest (long tracks: often the hand's own).
         order = np.lexsort((ids, ~on_body))
         if observing:
             tool_point = predicted_p_CP(np.asarray(reference_x), X_frame)
-            order = np.argsort(np.linalg.norm(p_CP - tool_point, axis=1))
+            nearest = np.argsort(np.linalg.norm(p_CP - tool_point, axis=1))
+            order = np.stack([nearest, order], axis=1).ravel()
         for k in order:
             if len(kept) >= params.max_candidates:
                 break
             i = int(ids[k])
             if (on_body[k] or in_body_cell[k]) and usable[k] and i not in present and i not in rejected:
                 kept.append(_admit(i, criteria, frame_time, p_CP[k], X_frame))
+                present.add(i)
                 fed = True
                 if math.isnan(round_start):
                     round_start = float(frame_time)
@@ -601,12 +604,14 @@ def _feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, r
 def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
              allowable_error=math.inf) -> CandidateBank:
     """``_observe_primary`` (the observed point and its witness), then the extra observers
-    (``params.max_observers``): every consistent point tracked now gives its own ``s_t`` under the
-    adopted camera with its own ``p_HP``, and the reported ``s_t`` is the lower median of all of
-    them (observed point, witness, observers). A change of the body (a slipped tool, a moved
-    camera) moves every point of the hand, a tracking failure one; and while the observed point is
-    lost (its face turned away, or its track ended in the change itself) the observers keep the
-    observation going, so a change is not missed for want of the one point the paper observes."""
+    (``params.max_observers``, the points nearest the adopted tool point first): every consistent
+    point tracked now gives its own ``s_t`` under the adopted camera with its own ``p_HP``. The
+    points within ``observe_radius`` of the tool point (the tool's) and the others (the hand's) are
+    two groups; the reported ``s_t`` is the larger of the groups' lower medians. A change of the
+    body moves every point of its group (a slipped tool the tool's, a moved camera all), a tracking
+    failure one; and while the observed point is lost (its face turned away, or its track ended in
+    the change itself) the observers keep the observation going, so a change is not missed for
+    want of the one point the paper observes."""
     before = bank.sample_count
     bank = _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
                             allowable_error)  # fmt: skip
@@ -616,35 +621,50 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     if not x_is_set(x):
         return bank
     x = np.array(x, dtype=float)
-    x_adopted = x.copy()
-    errors, observers = [], []
+    anchor = x[12:15].copy()  # the adopted tool point
+    errors, observers = [], []  # errors: (s_t, on the tool)
     for feature_id, p_HP, last in bank.observers:
         k = _gated_row(feature_id, last, row, p_CP, X_WH, params)
         if k is None or feature_id in (bank.observed, bank.witness):
             continue  # lost, jumped, or observed already: dropped
         if usable[k]:
             x[12:15] = p_HP
-            errors.append(_error(p_CP[k], X_WH, x))
+            errors.append((_error(p_CP[k], X_WH, x), _on_tool(p_HP, anchor, params)))
             last = (p_CP[k].copy(), X_WH)
         observers.append((feature_id, p_HP, last))
     if len(observers) < params.max_observers:
         taken = {o[0] for o in observers} | {bank.observed, bank.witness}
         options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=tuple(taken))
-        for _, feature_id, p_HP, k in _near_tool(options, x_adopted[12:15], params):
+        # The tool's points first (nearest the adopted tool point), then the hand's.
+        for _, feature_id, p_HP, k in sorted(options, key=lambda o: float(np.linalg.norm(o[2] - anchor))):
             if len(observers) >= params.max_observers:
                 break
             observers.append((feature_id, p_HP, (p_CP[k].copy(), X_WH)))
     bank = replace(bank, observers=tuple(observers))
     if bank.sample_count > before:  # the observed point (or its witness) gave a sample too
-        errors = errors + list(bank.sample_errors)
+        primary = [bank.observed_p_HP if bank.observed_p_HP is not None else anchor, bank.witness_p_HP]
+        errors += [(e, p is not None and _on_tool(p, anchor, params))
+                   for e, p in zip(bank.sample_errors, primary, strict=False)]
     if not errors:
         return bank
-    errors = sorted(e if math.isfinite(e) else math.inf for e in errors)
-    # The lower median: one point (the smallest of two) is the paper's; with three or more, a
-    # point that fails alone (a track that slid, a point re-acquired near the prediction by
-    # chance) moves it neither up nor down.
-    reported = errors[(len(errors) - 1) // 2]
+    # Per group (the tool's points, the hand's), the lower median: one point (the smallest of
+    # two) is the paper's; with three or more, a point that fails alone (a track that slid, a
+    # point re-acquired near the prediction by chance) moves it neither up nor down. The larger of
+    # the two groups' is reported: a slipped tool moves the tool's points only, a moved camera all.
+    reported = max(_lower_median([e for e, tool in errors if tool == group]) for group in (True, False))
     return replace(bank, sample_count=before + 1, sample_error=reported)
+
+
+def _on_tool(p_HP, anchor, params: CandidateParams) -> bool:
+    return float(np.linalg.norm(np.asarray(p_HP) - anchor)) <= params.observe_radius
+
+
+def _lower_median(values: list) -> float:
+    """The lower median (-inf for none): the smaller of two, the middle of three."""
+    if not values:
+        return -math.inf
+    values = sorted(v if math.isfinite(v) else math.inf for v in values)
+    return values[(len(values) - 1) // 2]
 
 
 def _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
