@@ -6,9 +6,12 @@ its tool gives the same ``p_H`` every frame (up to depth noise and pixel quantis
 sliding along a silhouette, or a depth taken from the background, does not. Prints, per
 candidate: frames seen, the median ``p_H`` relative to the rod tip, its wander (RMS and 90 %
 distance from the median), and the truth-fit RMS of its samples (``best_p_HP_given_camera`` with
-the true camera: what Eq. (30) leaves unexplained even with the right camera).
+the true camera: what Eq. (30) leaves unexplained even with the right camera; from the samples the
+loop's identifiers got). With ``--refine`` the mapped points are the refined ones
+(``perception.point_refinement`` with the scenario's ``hand_eye.refinement``) rather than the
+tracker's own.
 
-    .venv/bin/python bench/bench_hand_eye_candidates.py [--duration 30] [--scenario diagrams/hand_eye.yaml]
+    .venv/bin/python bench/bench_hand_eye_candidates.py [--duration 30] [--refine] [--scenario S]
 """
 
 from __future__ import annotations
@@ -99,10 +102,10 @@ def main() -> None:
     parser.add_argument("--scenario", type=Path, default=ROOT / "diagrams" / "hand_eye.yaml")
     parser.add_argument("--duration", type=float, default=30.0)
     parser.add_argument("--refine", action="store_true",
-                        help="map the refined points (perception.point_refinement) instead of the tracker's")
-    parser.add_argument("--corner-window", type=int, default=4)
+                        help="map the refined points (hand_eye.refinement) instead of the tracker's")
     args = parser.parse_args()
-    out = run(args.scenario, args.duration, RefinementParams(corner_window_px=args.corner_window, max_shift_px=2.0) if args.refine else None)
+    refinement = load_scenario(args.scenario).hand_eye.refinement.params() if args.refine else None
+    out = run(args.scenario, args.duration, refinement)
     R_WC, p_WC = out["X_WC"][:3, :3], out["X_WC"][:3, 3]
     print(f"{'id':>6} {'frames':>6} {'t0':>6} {'t1':>6}  p_H - tip (mm)            wander rms/90% (mm)"
           f"  truth-fit rms (mm)  spread (rad)  solver rms (mm)")
@@ -116,10 +119,11 @@ def main() -> None:
         p_fit = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
         fit = math.sqrt(max(mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_fit)), 0.0))
         rel = 1e3 * (median - tip)
+        leader = "LEADER" if fid == out["bank"].leader else ""
         print(f"{fid:6d} {len(rows):6d} {times[0]:6.1f} {times[-1]:6.1f}  "
               f"[{rel[0]:7.1f} {rel[1]:7.1f} {rel[2]:7.1f}]   {1e3 * math.sqrt(np.mean(d * d)):7.1f} "
-              f"{1e3 * np.percentile(d, 90):7.1f}   {1e3 * fit:10.2f}      {rotation_spread(c.statistic):6.3f}"
-              f"      {1e3 * c.solution.expected_rms:8.2f} {'LEADER' if fid == out['bank'].leader else ''}")
+              f"{1e3 * np.percentile(d, 90):7.1f}   {1e3 * fit:10.2f}      "
+              f"{rotation_spread(c.statistic):6.3f}      {1e3 * c.solution.expected_rms:8.2f} {leader}")
     for a in out["bank"].adoptions:
         print(f"adoption t={a.time:.2f} feature {a.feature_id} kind {a.kind}")
 
