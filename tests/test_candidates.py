@@ -425,3 +425,38 @@ def test_the_adopted_camera_is_refined_while_observing():
     bank = candidates.step(bank, params, CRITERIA, 400 * DT, 1.0, hand_pose(400), 400 * DT, np.array([9]),
                            np.array([seen(hand_pose(400), P_TOOL, rng)]), np.array([True]), np.array([True]))
     assert bank.refined_solution is None
+
+
+def test_with_no_observed_point_the_candidates_tell_a_moved_camera():
+    """``blind_min_samples``: when every observed track is gone, frames give no sample (the paper's
+    one point is simply lost) unless the candidates in view, all of them, disagree with the adopted
+    camera: then the frame counts as a violation (a moved camera), else it stays silent."""
+    params = replace(HANDOVER, max_observers=2, blind_min_samples=30, reacquire_radius=1e-6)
+    points = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05]}
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+    X_moved = TRUTH.X_WC.copy()  # the head turned by 0.1 rad
+    X_moved[:3, :3] = Rotation.from_rotvec([0.0, 0.1, 0.0]).as_matrix() @ TRUTH.X_WC[:3, :3]
+
+    def run_with(camera_after):
+        bank, rng, counts = CandidateBank(), np.random.default_rng(3), {}
+        for k in range(420):
+            X = hand_pose(k)
+            after = k >= 300  # new tracks of the same points (ids + 100): the old ones are gone
+            ids = [i + 100 * after for i in points]
+            X_WC = camera_after if after else TRUTH.X_WC
+            p = [X_WC[:3, :3].T @ (X[:3, :3] @ points[i] + X[:3, 3] - X_WC[:3, 3]) + rng.normal(0, 5e-4, 3)
+                 for i in points]
+            bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
+                                   np.ones(3, bool), np.ones(3, bool), x_true, allowable_error=1e-4)
+            counts[k] = (bank.sample_count, bank.sample_error)
+        return counts
+
+    same = run_with(TRUTH.X_WC)
+    # Blind and silent while the new points fit the camera; once they have observe_min_samples (50)
+    # they are observers again, within the noise.
+    assert same[348][0] == same[301][0] and same[419][0] > same[360][0]
+    assert max(same[k][1] for k in range(360, 420)) < 2e-5
+    moved = run_with(X_moved)
+    new = [k for k in range(301, 420) if moved[k][0] > moved[k - 1][0]]
+    assert new and new[0] <= 300 + 35  # once the new candidates have 30 samples
+    assert all(moved[k][1] > 1e-4 for k in new)  # each such frame is a violation

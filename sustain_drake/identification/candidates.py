@@ -102,6 +102,9 @@ class CandidateParams:
             constraint on the camera) for the joint refinement, the most samples first.
         max_observers: consistent points observed besides the observed point and its witness
             (``_observe``; 0: the observed point and witness only).
+        blind_min_samples: > 0: on a frame with no observed point, candidates with at least this
+            many samples are asked whether the adopted camera explains them (``_blind_evidence``;
+            0: no sample on such a frame, the paper's).
         observe_radius: m; a witness, an observer or a hand-over must lie within this of the
             adopted tool point in H (on the tool: a point of the gripper does not move when the
             tool slips; inf: anywhere on the hand).
@@ -137,10 +140,11 @@ class CandidateParams:
     max_observers: int = 0
     refine_interval: float = 0.0
     observe_radius: float = math.inf
+    blind_min_samples: int = 0
 
     def __post_init__(self):
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
-                and self.max_archived >= 0 and self.max_observers >= 0):
+                and self.max_archived >= 0 and self.max_observers >= 0 and self.blind_min_samples >= 0):
             raise ValueError(f"observe_min_samples and primary_failures must be >= 1 ({self})")
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
@@ -641,6 +645,8 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
                 break
             observers.append((feature_id, p_HP, (p_CP[k].copy(), X_WH)))
     bank = replace(bank, observers=tuple(observers))
+    if not errors and bank.sample_count == before and params.blind_min_samples > 0:
+        return _blind_evidence(bank, params, row, usable, x, allowable_error, before)
     if bank.sample_count > before:  # the observed point (or its witness) gave a sample too
         primary = [bank.observed_p_HP if bank.observed_p_HP is not None else anchor, bank.witness_p_HP]
         errors += [(e, p is not None and _on_tool(p, anchor, params))
@@ -653,6 +659,26 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     # the two groups' is reported: a slipped tool moves the tool's points only, a moved camera all.
     reported = max(_lower_median([e for e, tool in errors if tool == group]) for group in (True, False))
     return replace(bank, sample_count=before + 1, sample_error=reported)
+
+
+def _blind_evidence(bank, params, row, usable, x, allowable_error: float, before: int) -> CandidateBank:
+    """No observed point this frame (``blind_min_samples``): the candidates tracked now with at
+    least that many samples are asked instead. When at least two are and NONE is explained by the
+    adopted camera within the allowable error (its mean squared error with its own best ``p_HP``),
+    the frame counts as a sample of that size (the smallest): every point in view disagrees with
+    the model, as after a moved camera; one point of the hand or tool that fits (any point fits
+    while the hand only translates) keeps the frame silent."""
+    R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
+    misfits = []
+    for c in bank.candidates:
+        k = row.get(c.feature_id)
+        if k is None or not usable[k] or c.solution.num_samples < params.blind_min_samples:
+            continue
+        p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
+        misfits.append(mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP)))
+    if len(misfits) < 2 or not min(misfits) > allowable_error:
+        return bank
+    return replace(bank, sample_count=before + 1, sample_error=float(min(misfits)))
 
 
 def _on_tool(p_HP, anchor, params: CandidateParams) -> bool:
