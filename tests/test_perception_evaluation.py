@@ -108,6 +108,7 @@ def test_episode_evaluator_streams_frames_into_the_metrics():
     assert m["precision"] == 0.5 and m["recall"] == 0.5
     assert m["distractor_cells"] == 1 and m["distractor_cells_marked"] == 1
     assert m["latency_median_s"] == 1.0 and m["latency_cells"] == 1
+    assert m["latencies_s"] == [1.0]
     with pytest.raises(ValueError, match="expected 8 cells"):
         ev.update(3.0, lab, np.zeros(3), sdot)
     with pytest.raises(ValueError, match="no frames"):

@@ -247,6 +247,8 @@ class EpisodeEvaluator:
             "latency_median_s": float(np.median(latencies)) if latencies.size else None,
             "latency_p90_s": float(np.percentile(latencies, 90)) if latencies.size else None,
             "latency_cells": int(latencies.size),
+            # Every detected cell's latency, so that several episodes can be pooled.
+            "latencies_s": [round(float(x), 4) for x in np.sort(latencies)],
         })
         if self.parts:
             out["parts"] = {name: self._mask_summary(self.ever_part[k])

@@ -25,8 +25,9 @@ from pydrake.multibody.tree import (
     RigidBody,
     SpatialInertia,
 )
+from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import AffineSystem, MatrixGain
+from pydrake.systems.primitives import AffineSystem, MatrixGain, SharedPointerSystem
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
 from sustain_drake.station.models import make_parser, model_file
@@ -261,8 +262,35 @@ def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
     builder.Connect(_add_touch_motion(builder, world, scenario, motion.get_output_port()),
                     arm_desired.get_input_port())
     builder.Connect(arm_desired.get_output_port(), plant.get_desired_state_input_port(world.arm))
+    if m.gravity_compensation:
+        _add_arm_gravity_compensation(builder, world)
     builder.ExportInput(motion.GetInputPort("pause"), "motion_pause")
     builder.ExportInput(motion.GetInputPort("confirm"), "motion_confirm")
+
+
+def _add_arm_gravity_compensation(builder, world: _World) -> None:
+    """Feedforward of the arm's own gravity torques on its actuation input (added to the joints'
+    PD), computed on a controller model of the arm alone: the held tool is unknown to the robot."""
+    # SharedPointerSystem: the diagram keeps the controller model alive as long as it lives.
+    controller_plant = SharedPointerSystem.AddToBuilder(builder, MultibodyPlant(time_step=0.0))
+    arm = make_parser(controller_plant).AddModels(model_file("arm.sdf"))[0]
+    controller_plant.WeldFrames(controller_plant.world_frame(),
+                                controller_plant.GetFrameByName("arm_base", arm), X_W_ARM)
+    controller_plant.Finalize()
+    # The arm instance's actuation input is ordered by actuator, the inverse dynamics' output by
+    # generalized velocity; the same model file gives both one actuator per joint in one order.
+    actuated_dofs = [controller_plant.get_joint_actuator(a).joint().velocity_start()
+                     for a in controller_plant.GetJointActuatorIndices()]
+    if actuated_dofs != list(range(controller_plant.num_velocities())):
+        raise ScenarioError("arm model: gravity compensation needs one actuator per joint, "
+                            "in joint order")
+    gravity = builder.AddSystem(InverseDynamics(
+        controller_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
+    gravity.set_name("arm_gravity_compensation")
+    builder.Connect(world.plant.get_state_output_port(world.arm),
+                    gravity.get_input_port_estimated_state())
+    builder.Connect(gravity.get_output_port_generalized_force(),
+                    world.plant.get_actuation_input_port(world.arm))
 
 
 def _add_touch_motion(builder, world: _World, scenario: Scenario, babble):

@@ -99,6 +99,10 @@ class MotionConfig:
     confirm_step: float = 0.0
     confirm_near: float = 0.0
     period: float = 0.01  # s between the generator's updates
+    # The arm's controller adds the gravity torques of its own links (a model of the arm alone:
+    # not the held tool, which the robot does not know) to the joints' PD, as a real arm
+    # controller does; off, the arm sags ~0.4 deg under gravity until the PD balances it.
+    gravity_compensation: bool = False
 
 
 @dataclasses.dataclass
