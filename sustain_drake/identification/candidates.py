@@ -619,12 +619,11 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     before = bank.sample_count
     bank = _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
                             allowable_error)  # fmt: skip
-    if params.max_observers == 0 or bank.leader < 0:
+    if params.max_observers == 0:
         return bank
-    x = reference_x if x_is_set(reference_x) else bank.find(bank.leader).solution.x
-    if not x_is_set(x):
+    x = _model_in_use(bank, reference_x)
+    if x is None:
         return bank
-    x = np.array(x, dtype=float)
     anchor = x[12:15].copy()  # the adopted tool point
     errors, observers = [], []  # errors: (s_t, on the tool)
     for feature_id, p_HP, last in bank.observers:
@@ -693,6 +692,15 @@ def _lower_median(values: list) -> float:
     return values[(len(values) - 1) // 2]
 
 
+def _model_in_use(bank: CandidateBank, reference_x) -> np.ndarray | None:
+    """The model observations are judged against: the adopted ``x`` (reference) if set, else the
+    leader's solution; None when there is no leader or no model yet. A copy."""
+    if bank.leader < 0:
+        return None
+    x = reference_x if x_is_set(reference_x) else bank.find(bank.leader).solution.x
+    return np.array(x, dtype=float) if x_is_set(x) else None
+
+
 def _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
                      allowable_error=math.inf) -> CandidateBank:
     """The observed point's ``s_t`` (Eq. (2)) under the reference estimate, confirmed by a witness;
@@ -704,12 +712,9 @@ def _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, ref
     points, a tracking failure (a corner sliding along a silhouette onto the background) only one.
     When the observed point alone violates ``allowable_error`` for ``primary_failures`` samples
     while the witness does not, the witness becomes the observed point."""
-    if bank.leader < 0:
+    x = _model_in_use(bank, reference_x)
+    if x is None:
         return bank
-    x = reference_x if x_is_set(reference_x) else bank.find(bank.leader).solution.x
-    if not x_is_set(x):
-        return bank
-    x = np.array(x, dtype=float)
     anchor = x[12:15].copy()  # the adopted tool point
     if bank.observed_p_HP is not None:
         x[12:15] = bank.observed_p_HP
