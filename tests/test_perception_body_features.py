@@ -118,3 +118,21 @@ def test_a_body_feature_moving_while_the_arm_is_still_loses_its_hits():
     mem = run(mem, state, 1.2, 1.5, np.array([1, 2]), np.array([0, 0]),
               lambda t: [0.5, 0.0], arm_moving=False)
     assert features_on_body(mem, np.array([1, 2])).tolist() == [False, True]
+
+
+def test_one_hit_setting_confirms_after_one_trial_and_still_time_motion_revokes_it():
+    # diagrams/body_detection.yaml uses feature_hits: 1. Its safety net is Eq. (26): a feature
+    # that moves while every actuator has been still loses its hit (a track gone onto a person).
+    one = FeatureParams(hits=1)
+    ids, cell = np.array([1, 2]), np.array([0, 0])
+    state = trial_state(1, 1.0)
+    rises = lambda t: [0.5 * (t > 1.1), 0.0]  # noqa: E731 - feature 1 answers the trial
+    mem = run(FeatureMemory(), state, 0.5, 1.5, ids, cell, rises)
+    assert features_on_body(mem, ids, one).tolist() == [True, False]
+    assert features_on_body(mem, ids).tolist() == [False, False]  # default: two trials
+    # The arm stops; 0.5 s later feature 1 moves by itself: no longer body.
+    state.last_motion_a[:] = 1.5
+    mem = run(mem, state, 1.5, 2.0, ids, cell, lambda t: [0.0, 0.0], arm_moving=False)
+    assert features_on_body(mem, ids, one).tolist() == [True, False]
+    mem = run(mem, state, 2.0, 2.2, ids, cell, lambda t: [0.5, 0.0], arm_moving=False)
+    assert features_on_body(mem, ids, one).tolist() == [False, False]
