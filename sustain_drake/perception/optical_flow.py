@@ -257,11 +257,17 @@ def back_project(p_px: np.ndarray, depth: np.ndarray | None,
     z = np.zeros(p.shape[0])
     z[inside] = d[v[inside], u[inside]]
     valid = inside & np.isfinite(z) & (z > 0.0)
-    zv = z[valid]
-    p_CP[valid, 0] = (p[valid, 0] - intrinsics.cx) * zv / intrinsics.fx
-    p_CP[valid, 1] = (p[valid, 1] - intrinsics.cy) * zv / intrinsics.fy
-    p_CP[valid, 2] = zv
+    p_CP[valid] = pinhole_points(p[valid], z[valid], intrinsics)
     return p_CP, valid
+
+
+def pinhole_points(p_px: np.ndarray, z: np.ndarray, intrinsics: PinholeIntrinsics) -> np.ndarray:
+    """``p_CP = ((u - cx) z / fx, (v - cy) z / fy, z)`` (K x 3, m) for pixels ``p_px`` (K x 2) at
+    depths ``z`` (K, m, along +Z of C): the pinhole model, for depths the caller has checked."""
+    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
+    z = np.asarray(z, dtype=float).ravel()
+    return np.column_stack([(p[:, 0] - intrinsics.cx) * z / intrinsics.fx,
+                            (p[:, 1] - intrinsics.cy) * z / intrinsics.fy, z])
 
 
 def cell_visual_change(grid: CellGrid, p_px: np.ndarray, flow_px: np.ndarray, dt: float,
@@ -401,12 +407,14 @@ def track_frame(state: TrackerState, image: np.ndarray, depth: np.ndarray | None
         new.identity_drops += int(np.sum(~same))
         keep[np.flatnonzero(keep)[~same]] = False
         ids, pts, flow = state.ids[keep], p1[keep], (p1 - p0)[keep].astype(float)
+        p_CP, valid = p1_CP[keep], valid1[keep]  # back-projected once, for the identity test
         dt = time - state.last_time
         sdot = cell_visual_change(grid, pts, flow, dt, params.min_flow_px)
     else:
         ids = np.zeros(0, np.int64)
         pts = np.zeros((0, 2), np.float32)
         flow = np.zeros((0, 2))
+        p_CP, valid = np.zeros((0, 3)), np.zeros(0, bool)
         sdot = np.zeros(grid.num_cells)
 
     if ids.size < params.reseed_fraction * params.max_corners:
@@ -417,8 +425,10 @@ def track_frame(state: TrackerState, image: np.ndarray, depth: np.ndarray | None
             ids = np.concatenate([ids, new_ids])
             pts = np.concatenate([pts, seeds])
             flow = np.concatenate([flow, np.zeros((seeds.shape[0], 2))])
+            seed_CP, seed_valid = back_project(seeds, depth, intrinsics)
+            p_CP = np.concatenate([p_CP, seed_CP])
+            valid = np.concatenate([valid, seed_valid])
 
-    p_CP, valid = back_project(pts, depth, intrinsics)
     new.prev_gray = gray.copy()
     new.ids = ids
     new.p_px = pts.astype(np.float32)

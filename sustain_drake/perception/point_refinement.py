@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from sustain_drake.perception.optical_flow import PinholeIntrinsics, to_gray
+from sustain_drake.perception.optical_flow import PinholeIntrinsics, pinhole_points, to_gray
 
 
 @dataclass(frozen=True)
@@ -122,10 +122,7 @@ def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrin
     z = local_depth(depth, refined, params)
     ok &= np.isfinite(z) & (z > 0)
     p_CP = np.zeros((p.shape[0], 3))
-    # The pinhole model of optical_flow.back_project, with the robust depth instead of one pixel's.
-    p_CP[ok, 0] = (refined[ok, 0] - intrinsics.cx) * z[ok] / intrinsics.fx
-    p_CP[ok, 1] = (refined[ok, 1] - intrinsics.cy) * z[ok] / intrinsics.fy
-    p_CP[ok, 2] = z[ok]
+    p_CP[ok] = pinhole_points(refined[ok], z[ok], intrinsics)  # with the robust depth
     if return_pixels:
         return p_CP, ok, np.where(ok[:, None], refined, p)
     return p_CP, ok
