@@ -21,11 +21,12 @@ import json
 import statistics
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from seeds import meets, run_seeds  # noqa: E402  (bench/seeds.py)
 
 from sustain_drake.cli.common import write_atomically  # noqa: E402
 from sustain_drake.cli.simulate import simulate_scenario  # noqa: E402
@@ -49,7 +50,7 @@ def _timed(module, name: str, log: list[float]):
     return fn
 
 
-def run_seed(scenario: Path, seed: int, out: Path, duration: float | None) -> dict:
+def run_seed(scenario: Path, out: Path, duration: float | None, seed: int) -> dict:
     # Per-frame cost of the tracker and the detector in this run (this worker process only).
     import sustain_drake.systems.motion_coincidence_detector as detector_module
     import sustain_drake.systems.optical_flow_tracker as tracker_module
@@ -79,12 +80,6 @@ def run_seed(scenario: Path, seed: int, out: Path, duration: float | None) -> di
     return row
 
 
-def meets(value, op: str, bound: float) -> bool:
-    if value is None:
-        return False
-    return {">=": value >= bound, "<=": value <= bound, "==": value == bound}[op]
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenario", type=Path, default=ROOT / "diagrams" / "body_detection.yaml")
@@ -94,9 +89,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=ROOT / "out" / "bench_body_detection")
     args = p.parse_args(argv)
 
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        rows = list(pool.map(run_seed, [args.scenario] * len(args.seeds), args.seeds,
-                             [args.out] * len(args.seeds), [args.duration] * len(args.seeds)))
+    rows = run_seeds(run_seed, args.seeds, args.jobs, args.scenario, args.out, args.duration)
     header = ("seed", "precision", "recall", "iou", "distr.", "latency median / p90", "true",
               "marked", "recall cells/features", "ms/frame", "wall")
     print(" | ".join(header))
