@@ -24,6 +24,7 @@ from pydrake.systems.sensors import LcmImageArrayToImages
 from sustain_drake.experiments.body_detection_config import BodyDetectionConfig
 from sustain_drake.experiments.hand_eye_config import HandEyeConfig
 from sustain_drake.experiments.kinesthetic_config import KinestheticConfig
+from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers, FeatureRefiner
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.ground_truth import PoseToVector
@@ -47,10 +48,16 @@ class HandEyeLoop:
     candidates: CandidateIdentifiers
     state_machine: CoordinationStateMachine
     refiner: FeatureRefiner | None = None
+    camera_motion: CameraMotionDetector | None = None
 
     def image_inputs(self, name: str) -> list:
         """The input ports that take the camera's ``name`` (color_image, depth_image, image_time)."""
         return [s.GetInputPort(name) for s in (self.tracker, self.refiner) if s is not None]
+
+    def actuator_inputs(self) -> list:
+        """The input ports that take the joint positions (the detector's, the camera-motion detector's)."""
+        systems = (self.detector, self.camera_motion)
+        return [s.GetInputPort("actuator_positions") for s in systems if s is not None]
 
 
 @dataclass
@@ -64,8 +71,10 @@ class PayloadLoop:
 def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: HandEyeConfig,
                       perception: BodyDetectionConfig) -> HandEyeLoop:  # fmt: skip
     """Adds the tracker, detector, candidate identifiers and state machine, connected to each other.
-    Left for the caller: the images (``HandEyeLoop.image_inputs``: the tracker's and, with
-    ``hand_eye.refine_points``, the ``FeatureRefiner``'s), the detector's ``actuator_positions``,
+    With ``hand_eye.camera_motion.enabled``, a ``CameraMotionDetector`` feeds the state machine's
+    ``camera_motion``. Left for the caller: the images (``HandEyeLoop.image_inputs``: the tracker's
+    and, with ``hand_eye.refine_points``, the ``FeatureRefiner``'s), the joint positions
+    (``HandEyeLoop.actuator_inputs``: the detector's and the camera-motion detector's),
     the candidates' ``X_WH``, and the uses of ``detector.confirm`` and ``state_machine.pause``.
     Raises ValueError on bad settings."""
     criteria, rule = hand_eye.coordination.criteria(), hand_eye.coordination.rule()
@@ -99,7 +108,17 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
     connect_identify_observe(builder, candidates, machine)
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
-    return HandEyeLoop(tracker, detector, candidates, machine, refiner)
+    camera = None
+    if hand_eye.camera_motion.enabled:  # the camera notices its own motion from the static scene
+        camera = builder.AddSystem(CameraMotionDetector(
+            num_joints, tracker.grid.num_cells, (info.width(), info.height()),
+            hand_eye.camera_motion.params(), period=period, offset=0.75 * period))  # fmt: skip
+        camera.set_name("camera_motion_detector")
+        builder.Connect(tracker.GetOutputPort("tracked_features"), camera.GetInputPort("tracked_features"))
+        for name in ("feature_on_body", "body_feature_cells"):
+            builder.Connect(detector.GetOutputPort(name), camera.GetInputPort(name))
+        builder.Connect(camera.GetOutputPort("camera_motion"), machine.GetInputPort("camera_motion"))
+    return HandEyeLoop(tracker, detector, candidates, machine, refiner, camera)
 
 
 def connect_identify_observe(builder, identifier, machine) -> None:
@@ -227,6 +246,7 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
         - hand_eye_mode
         - hand_eye_events
         - hand_eye_allowable_error
+        - camera_motion (with hand_eye.camera_motion.enabled)
         - payload_mass
         - p_KCm
         - payload_mode
@@ -249,6 +269,8 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     Outputs: ``X_WC``, ``p_HP``, ``payload_mass``, ``p_KCm`` (adopted estimates, see
     ``AdoptedEstimates``); ``hand_eye_mode`` and ``payload_mode`` (1: 0 identify, 1 observe);
     ``*_events`` (the state machines' event lists); ``hand_eye_allowable_error`` (1, m^2);
+    ``camera_motion`` (2, ``[moving, moves]``: the camera noticed its own motion from the static
+    scene, ``CameraMotionDetector``; each new move is a hand-eye change detection);
     the touch estimator's ``touch``, ``p_WP``, ``f_env_W``; for the user's motion generator
     ``motion_confirm`` (the detector's confirming-motion request, paper §3.3) and
     ``hand_eye_pause`` and ``payload_pause`` (2 each, ``[request_id, seconds]``: each state
@@ -272,8 +294,10 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
         builder.ExportInput(first, name)
         for port in others:
             builder.ConnectInput(name, port)
-    joint_positions = builder.ExportInput(
-        vision.detector.GetInputPort("actuator_positions"), "joint_positions")  # fmt: skip
+    first, *others = vision.actuator_inputs()
+    joint_positions = builder.ExportInput(first, "joint_positions")
+    for port in others:
+        builder.ConnectInput(joint_positions, port)
     builder.ExportInput(touch.gate.GetInputPort("joint_velocities"), "joint_velocities")
     if plant is not None:
         fk = builder.AddSystem(HandPoseFromPlant(plant, hand_frame, sensor_frame, model_instance))
@@ -306,6 +330,8 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
         builder.ExportOutput(machine.GetOutputPort("mode"), f"{prefix}_mode")
         builder.ExportOutput(machine.GetOutputPort("events"), f"{prefix}_events")
     builder.ExportOutput(vision.state_machine.GetOutputPort("allowable_error"), "hand_eye_allowable_error")
+    if vision.camera_motion is not None:
+        builder.ExportOutput(vision.camera_motion.GetOutputPort("camera_motion"), "camera_motion")
     if touch.estimator is not None:
         for name in ("touch", "p_WP", "f_env_W"):
             builder.ExportOutput(touch.estimator.GetOutputPort(name), name)

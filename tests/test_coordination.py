@@ -195,3 +195,68 @@ def test_a_stale_solution_after_a_detection_is_not_adopted():
     # A fresh solution (its samples all came after the detection) is adopted.
     state, event = coordination.step(state, RULE, 6.0, True, 1e-6, detected_at + 20, 0.0, 12)
     assert event.kind == coordination.CONVERGED and state[coordination.MODE] == coordination.OBSERVE
+
+
+def test_a_camera_move_is_a_change_detection_and_keeps_the_identifier_reset_while_it_lasts():
+    """The camera-motion input (beyond the paper): a new move in OBSERVE is the rule's change
+    detection; while the camera moves every tick resets the identifier and nothing is adopted;
+    a move while identifying resets too; a constant count changes nothing."""
+    state = observing_state()
+    ok = 1e-6  # well within sigma = 1e-4
+    # Moves count constant (0): the paper's rule, as without the input.
+    same, events = state, []
+    for k in range(5):
+        same, event = coordination.step(same, RULE, 0.1 * k, True, 1e-6, 2 + k, ok, camera_moves=0)
+        events += [event] if event else []
+    assert not events and same[coordination.MODE] == coordination.OBSERVE
+    # A new move: detected at once, with its time, like the rule's detection.
+    state, event = coordination.step(same, RULE, 1.0, True, 1e-6, 7, ok, camera_moving=True, camera_moves=1)
+    assert event.kind == coordination.CHANGE_DETECTED and event.time == pytest.approx(1.0)
+    assert event.detail == coordination.CAMERA_MOVED_DETAIL
+    assert state[coordination.MODE] == coordination.IDENTIFY and state[coordination.RESET_COUNT] == 1
+    assert state[coordination.DETECTIONS] == 1
+    # While it moves: reset on every tick, a converged (fresh) solution is not adopted.
+    for k in range(3):
+        state, event = coordination.step(state, RULE, 1.1 + 0.1 * k, True, 1e-6, 8 + k, ok, 1,
+                                         camera_moving=True, camera_moves=1)  # fmt: skip
+        assert event is None and state[coordination.RESET_COUNT] == 2 + k
+        assert state[coordination.MODE] == coordination.IDENTIFY
+    # At rest: the next fresh converged solution is adopted; a stale one (samples from before) not.
+    state, event = coordination.step(state, RULE, 1.5, True, 1e-6, 11, ok, 5, camera_moves=1)
+    assert event is None  # 5 samples, but only 1 arrived since the last reset
+    state, event = coordination.step(state, RULE, 1.6, True, 1e-6, 12, ok, 2, camera_moves=1)
+    assert event.kind == coordination.CONVERGED and state[coordination.RESET_COUNT] == 4
+    # A move while identifying: reset and detected too (a half-identified model is stale).
+    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, 0.0, camera_moves=0)
+    state, event = coordination.step(state, RULE, 0.1, False, 1.0, 2, 0.0, camera_moving=True, camera_moves=1)
+    assert event.kind == coordination.CHANGE_DETECTED and state[coordination.RESET_COUNT] == 1
+
+
+class ScriptedCameraMotion(LeafSystem):
+    """``[moving, moves]`` of a camera that moves from ``t0`` for ``duration`` s."""
+
+    def __init__(self, t0, duration):
+        super().__init__()
+        self.DeclareVectorOutputPort("camera_motion", 2, lambda c, o: o.SetFromVector(
+            [float(t0 <= c.get_time() < t0 + duration), float(c.get_time() >= t0)]))  # fmt: skip
+
+
+def test_the_state_machine_takes_the_camera_motion_input():
+    truth, _, _, _ = build(t_slip=np.inf)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ScriptedHandPoint(truth, truth.p_HP, np.inf, 0.1))
+    ident = builder.AddSystem(SustainableIdentifierSystem(EyeToHandFormulation(), period=0.1))
+    sm = builder.AddSystem(CoordinationStateMachine(16, period=0.1))
+    camera = builder.AddSystem(ScriptedCameraMotion(5.0, 1.0))
+    builder.Connect(source.GetOutputPort("p_CP"), ident.GetInputPort("p_CP"))
+    builder.Connect(source.GetOutputPort("X_WH"), ident.GetInputPort("X_WH"))
+    builder.Connect(camera.get_output_port(), sm.GetInputPort("camera_motion"))
+    connect_identify_observe(builder, ident, sm)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(12.0)
+    events = sm.events(sm.GetMyContextFromRoot(simulator.get_context()))
+    assert [e.kind for e in events] == [coordination.CONVERGED, coordination.CHANGE_DETECTED,
+                                        coordination.CONVERGED]  # fmt: skip
+    assert events[0].time < 5.0 and events[1].time == pytest.approx(5.0)
+    # Nothing adopted while the camera moved (to 6 s), then re-identified from fresh samples.
+    assert 6.0 + 0.1 * 9 <= events[2].time < 12.0

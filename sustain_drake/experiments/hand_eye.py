@@ -5,6 +5,8 @@ The loop, from images only (no ground truth inside it)::
     station color/depth -> OpticalFlowTracker -> MotionCoincidenceDetector (confirm -> motion_confirm)
         tracked_features + feature_on_body + X_WH -> CandidateIdentifiers -> CoordinationStateMachine
         state machine: adopted_x -> reference_x, reset -> reset, pause -> motion_pause
+        (camera_motion.enabled) tracked_features + feature_on_body + joints -> CameraMotionDetector
+            -> state machine camera_motion (a camera move is a change detection)
 
 ``finish`` evaluates against the station's ground truth (``true_X_WC``, ``true_p_HP``, logged
 beside the loop): the time of each convergence and each detection, the error of each adopted
@@ -33,6 +35,7 @@ from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.station import ScenarioError, camera_info
 from sustain_drake.station.scenario import ARM_JOINTS, HeadMove, ToolSlip
 from sustain_drake.sustainable_coordination import add_hand_eye_loop
+from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.ground_truth import PoseToVector
@@ -54,11 +57,13 @@ class HandEyeHandle:
     candidates: CandidateIdentifiers
     state_machine: CoordinationStateMachine
     loggers: dict
+    camera_motion: CameraMotionDetector | None = None
 
 
 def build_loop(builder, station, scenario):
-    """Adds tracker, detector, candidates and state machine wired to ``station`` (its image,
-    encoder, ``X_WH`` outputs and ``motion_confirm``/``motion_pause`` inputs). Returns them."""
+    """Adds tracker, detector, candidates, state machine (and, if enabled, the camera-motion
+    detector) wired to ``station`` (its image, encoder, ``X_WH`` outputs and
+    ``motion_confirm``/``motion_pause`` inputs). Returns the ``HandEyeLoop``."""
     config, perception = scenario.hand_eye, scenario.body_detection
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("depth_image")):
         raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
@@ -67,24 +72,28 @@ def build_loop(builder, station, scenario):
                                  config, perception)  # fmt: skip
     except ValueError as e:
         raise ScenarioError(f"hand_eye: {e}") from None
-    tracker, detector, candidates, machine = loop.tracker, loop.detector, loop.candidates, loop.state_machine
+    detector, candidates, machine = loop.detector, loop.candidates, loop.state_machine
     for name in ("color_image", "depth_image", "image_time"):
         for port in loop.image_inputs(name):
             builder.Connect(station.GetOutputPort(name), port)
-    builder.Connect(station.GetOutputPort("joint_positions"), detector.GetInputPort("actuator_positions"))
+    for port in loop.actuator_inputs():
+        builder.Connect(station.GetOutputPort("joint_positions"), port)
     if perception.confirm:  # the detector's confirming motions (paper §3.3), as in body_detection
         builder.Connect(detector.GetOutputPort("confirm"), station.GetInputPort("motion_confirm"))
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
-    return tracker, detector, candidates, machine
+    return loop
 
 
 def add_to_diagram(builder, station, scenario, meshcat) -> HandEyeHandle:
-    tracker, detector, candidates, machine = build_loop(builder, station, scenario)
+    loop = build_loop(builder, station, scenario)
+    tracker, detector, candidates, machine = loop.tracker, loop.detector, loop.candidates, loop.state_machine
     period = 1.0 / scenario.hand_eye.log_rate
-    systems = {"candidates": candidates, "state_machine": machine, "station": station}
+    systems = {"candidates": candidates, "state_machine": machine, "station": station,
+               "camera_motion": loop.camera_motion}
+    logged = _LOGGED + ((("camera_motion", "camera_motion"),) if loop.camera_motion is not None else ())
     loggers = {port: LogVectorOutput(systems[key].GetOutputPort(port), builder, period)
-               for key, port in _LOGGED}
+               for key, port in logged}
     for name in _POSES:
         matrix = builder.AddSystem(PoseToVector())
         matrix.set_name(f"hand_eye_{name}_matrix")
@@ -96,7 +105,7 @@ def add_to_diagram(builder, station, scenario, meshcat) -> HandEyeHandle:
         builder.Connect(machine.GetOutputPort("mode"), viz.GetInputPort("mode"))
         for name in ("X_WH", "true_X_WC", "true_p_HP"):
             builder.Connect(station.GetOutputPort(name), viz.GetInputPort(name))
-    return HandEyeHandle(scenario, tracker, detector, candidates, machine, loggers)
+    return HandEyeHandle(scenario, tracker, detector, candidates, machine, loggers, loop.camera_motion)
 
 
 class EstimateVisualizer(LeafSystem):
@@ -191,6 +200,9 @@ def evaluate(handle, diagram, context) -> dict:
     bank = handle.candidates.bank(handle.candidates.GetMyContextFromRoot(context))
     convergences = [e.time for e in events if e.kind == coordination.CONVERGED]
     detections = [e.time for e in events if e.kind == coordination.CHANGE_DETECTED]
+    # Who saw each change: the observation rule (Eq. (2) errors) or the camera's own motion.
+    causes = {e.time: "camera_motion" if e.detail == coordination.CAMERA_MOVED_DETAIL else "observation"
+              for e in events if e.kind == coordination.CHANGE_DETECTED}
     t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
     _, X_WH_log = _log(handle, diagram, context, "X_WH")
     _, p_HP_log = _log(handle, diagram, context, "true_p_HP")
@@ -230,6 +242,7 @@ def evaluate(handle, diagram, context) -> dict:
         limit = nxt[0] if nxt else math.inf
         d["detected_s"] = after[0] if after and after[0] < limit else None
         d["detection_latency_s"] = None if d["detected_s"] is None else d["detected_s"] - d["time_s"]
+        d["detected_by"] = None if d["detected_s"] is None else causes[d["detected_s"]]
         reconv = [t for t in convergences if d["detected_s"] is not None and t > d["detected_s"]]
         d["reconverged_s"] = reconv[0] if reconv else None
         d["reconvergence_after_detection_s"] = None if not reconv else reconv[0] - d["detected_s"]
@@ -245,6 +258,8 @@ def evaluate(handle, diagram, context) -> dict:
     return {
         "convergence_times_s": convergences,
         "detection_times_s": detections,
+        "detection_causes": [causes[t] for t in detections],
+        "camera_moves_s": _camera_moves(handle, diagram, context),
         "adopted": adopted,
         "disturbances": disturbances,
         "false_alarms_s": false_alarms,
@@ -257,6 +272,14 @@ def evaluate(handle, diagram, context) -> dict:
         "refinement_times_s": refinements,
         "model_in_use_at_end": _camera_errors(t_x, x_log, t_pose, X_WC_log, float(t_x[-1])),
     }
+
+
+def _camera_moves(handle, diagram, context) -> list[float] | None:
+    """When the camera-motion detector declared each camera move (None without the detector)."""
+    if handle.camera_motion is None:
+        return None
+    times, data = _log(handle, diagram, context, "camera_motion")
+    return [float(t) for t in times[1:][np.diff(data[:, 1]) > 0]]
 
 
 def _camera_errors(t_x, x_log, t_pose, X_WC_log, t: float) -> dict | None:

@@ -7,18 +7,22 @@ from dataclasses import field
 
 from sustain_drake.experiments.coordination_config import CoordinationConfig
 from sustain_drake.identification.candidates import CandidateParams
+from sustain_drake.perception.camera_motion import CameraMotionParams
 from sustain_drake.perception.point_refinement import RefinementParams
 
 
-def _scenario_mirror(params_class, name: str, doc: str):
+def _scenario_mirror(params_class, name: str, doc: str, extra: tuple = ()):
     """A mutable dataclass with the fields, defaults and (resolved) types of the frozen
     ``params_class``, for a scenario section (yaml_load_typed needs real types and a mutable
-    dataclass), and ``params()`` to make the params. One list of fields: no defaults to drift."""
+    dataclass), and ``params()`` to make the params. One list of fields: no defaults to drift.
+    ``extra``: more ``(name, type, field)`` fields first (the section's own, not the params')."""
     hints = typing.get_type_hints(params_class)
-    fields = [(f.name, hints[f.name], field(default=f.default)) for f in dataclasses.fields(params_class)]
+    names = [f.name for f in dataclasses.fields(params_class)]
+    fields = list(extra) + [(n, hints[n], field(default=f.default))
+                            for n, f in zip(names, dataclasses.fields(params_class), strict=True)]
 
     def params(self):
-        return params_class(**dataclasses.asdict(self))
+        return params_class(**{n: getattr(self, n) for n in names})
 
     return dataclasses.make_dataclass(name, fields, namespace={"params": params, "__doc__": doc})
 
@@ -39,12 +43,23 @@ RefinementConfig = _scenario_mirror(
 )
 
 
+CameraMotionConfig = _scenario_mirror(
+    CameraMotionParams,
+    "CameraMotionConfig",
+    "The camera notices its own motion from the static scene (beyond the paper): ``enabled`` adds "
+    "a ``CameraMotionDetector`` whose camera moves are change detections; the thresholds: see "
+    "``perception.camera_motion.CameraMotionParams`` (px, s, rad/s).",
+    extra=(("enabled", bool, field(default=False)),),
+)
+
+
 @dataclasses.dataclass
 class HandEyeConfig:
     """Sustainable marker-free hand-eye coordination: identifiers per candidate body feature and
     the identify <-> observe state machine.
 
-    ``refine_points``: feed the candidates the refined points (``FeatureRefiner``: sub-pixel
+    ``camera_motion``: the camera-motion detector (off by default: the paper's observation rule
+    alone). ``refine_points``: feed the candidates the refined points (``FeatureRefiner``: sub-pixel
     corner and robust depth, ``refinement``) instead of the tracker's. ``false_alarm_window``: s, a
     detection with no disturbance in that long before it is a false alarm (evaluation only).
     ``log_rate``: samples per second of the logged signals (plots)."""
@@ -52,6 +67,7 @@ class HandEyeConfig:
     enabled: bool = False
     coordination: CoordinationConfig = field(default_factory=CoordinationConfig)
     candidates: CandidatesConfig = field(default_factory=CandidatesConfig)
+    camera_motion: CameraMotionConfig = field(default_factory=CameraMotionConfig)
     refine_points: bool = True
     refinement: RefinementConfig = field(default_factory=RefinementConfig)
     false_alarm_window: float = 2.0

@@ -20,6 +20,13 @@ adopted model (its solution's ``refinement`` counter goes up: more samples of th
 within the allowable error of the adopted model); it is adopted in place, with the allowable error
 recomputed, and the mode stays OBSERVE. The paper fixes the model until a change is detected.
 
+Beyond the paper (``camera_moves``, from ``perception.camera_motion``): the camera notices its own
+motion from the static scene. A new camera move is a change detection like the rule's (the same
+event, with its time: the mode goes to IDENTIFY and the identifier is reset), in either mode (a
+half-identified model is as stale as an adopted one); while that camera is still moving the
+identifier is kept reset (each tick bumps the reset count), since samples taken while the camera
+moves fit no camera. Without these inputs (None) the rule is the one above, unchanged.
+
 The state is a small flat vector (``CoordinationState``) so that a Drake system can hold it in its
 context; ``step`` is a pure function of it.
 """
@@ -77,8 +84,8 @@ class CoordinationRule:
 
 # Layout of the state vector.
 (MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE,
- REFINEMENT) = range(10)
-STATE_SIZE = 10
+ REFINEMENT, CAMERA_MOVES, CAMERA_MOVING) = range(12)
+STATE_SIZE = 12
 
 
 def allowable_error(rule: CoordinationRule, expected_mse: float) -> float:
@@ -99,8 +106,11 @@ class Event:
     """Something the rule decided, at a time in seconds."""
 
     time: float
-    kind: str  # CONVERGED or CHANGE_DETECTED
+    kind: str  # CONVERGED, CHANGE_DETECTED or REFINED
     detail: str = ""
+
+
+CAMERA_MOVED_DETAIL = "the camera moved"  # the detail of a change detected from the camera's own motion
 
 
 def step(
@@ -113,6 +123,8 @@ def step(
     sample_error: float,
     num_samples: int | None = None,
     refinement: int = 0,
+    camera_moving: bool = False,
+    camera_moves: int | None = None,
 ) -> tuple[np.ndarray, Event | None]:
     """One tick of the rule. Returns the new state (a copy) and the event it decided, if any.
 
@@ -131,10 +143,23 @@ def step(
             identification when it has no more samples than arrived since the detection.
         refinement: the solution's refinement counter (``adopt_refinements``): in OBSERVE, a
             converged solution with a higher counter than the adopted one is a refinement of it.
+        camera_moving, camera_moves: the camera-motion detector's ``[moving, moves]`` (None: no
+            detector, the paper's rule alone): a count above the last one seen is a new camera move.
     """
     new = state.copy()
     new_sample = sample_count != int(state[LAST_SAMPLE])
     new[LAST_SAMPLE] = sample_count
+    if camera_moves is not None:
+        new[CAMERA_MOVES] = camera_moves
+        if camera_moves > state[CAMERA_MOVES]:
+            new[CAMERA_MOVING] = 1.0
+            return _detect_change(new, sample_count), Event(time, CHANGE_DETECTED, CAMERA_MOVED_DETAIL)
+        if state[CAMERA_MOVING]:
+            if camera_moving:  # keep the identifier reset: these samples fit no camera
+                new[RESET_COUNT] += 1
+                new[RESET_SAMPLE] = sample_count
+                return new, None
+            new[CAMERA_MOVING] = 0.0
     if int(state[MODE]) == IDENTIFY:
         stale = num_samples is not None and num_samples > sample_count - state[RESET_SAMPLE]
         if converged and math.isfinite(expected_mse) and not stale:
@@ -159,10 +184,17 @@ def step(
     else:
         new[VIOLATIONS] = 0
     if new[VIOLATIONS] >= rule.max_consecutive_violations:
-        new[MODE] = IDENTIFY
-        new[VIOLATIONS] = 0
-        new[RESET_COUNT] += 1
-        new[DETECTIONS] += 1
-        new[RESET_SAMPLE] = sample_count
-        return new, Event(time, CHANGE_DETECTED, f"{rule.max_consecutive_violations} samples over the limit")
+        return _detect_change(new, sample_count), Event(
+            time, CHANGE_DETECTED, f"{rule.max_consecutive_violations} samples over the limit")
     return new, None
+
+
+def _detect_change(new: np.ndarray, sample_count: int) -> np.ndarray:
+    """A change detection (in place on ``new``): back to IDENTIFY, the identifier reset (its
+    solutions with more samples than arrive from now on are stale)."""
+    new[MODE] = IDENTIFY
+    new[VIOLATIONS] = 0
+    new[RESET_COUNT] += 1
+    new[DETECTIONS] += 1
+    new[RESET_SAMPLE] = sample_count
+    return new

@@ -6,21 +6,34 @@ point when the camera moved is blind to the move. But a moving camera moves the 
 scene in the image coherently (one global image motion), whereas the robot moves only its own
 body's features and a walking person a minority of them. So, per frame:
 
-- the *background*: the tracked features that were tracked in the previous frame too (a flow
-  from a real track, not a feature seeded now) and are not the robot's (neither a body feature
-  nor in a body cell: ``robot`` below);
+- the *background*: the *anchors*, tracked features that have not moved against the scene for at
+  least ``anchor_time`` s (their flow off the frame's global motion by at most ``feature_still_px``,
+  or ``inlier_px`` while the scene moves: a static corner stays an anchor while the camera turns)
+  and are not the robot's (neither a body feature nor in a body cell: ``robot`` below), unless the
+  arm has been at rest for ``anchor_time`` (a body at rest is static scene). A walking person's
+  features keep moving and never become anchors; a feature seeded in this frame has no flow yet;
 - the *global motion*: a similarity (rotation, uniform scale, translation; 4 degrees of freedom)
-  fitted by RANSAC (``cv2.estimateAffinePartial2D``) from the background's previous pixels
-  (``p_px - flow_px``) to its current ones;
-- the frame *moves* when at least ``min_background`` background features exist, at least
+  fitted by RANSAC (``cv2.estimateAffinePartial2D``) from the anchors' previous pixels
+  (``p_px - flow_px``) to their current ones;
+- the frame *moves* when at least ``min_background`` anchors exist, at least
   ``min_inlier_fraction`` of them are inliers of that motion (within ``inlier_px``) and its
-  displacement (below) exceeds ``still_px``. A person or the arm moving over a still background
-  leaves the still background as the consensus (displacement 0); fewer features than
-  ``min_background`` say nothing (the frame is not judged moving).
+  displacement (below) exceeds ``still_px``. The arm or a person starting to move over a still
+  background leaves the still anchors as the consensus (displacement 0); fewer anchors than
+  ``min_background`` say nothing (the frame is not judged moving). Within ``onset_window`` s of
+  an actuator onset (a joint starting to move) no frame moves: features of the arm that rested
+  long enough to be anchors move coherently then (the coincidence of actuator and
+  visual onsets that makes them body, paper Eq. (27)); they stop being anchors instead.
+
+**It needs a textured static scene.** In ``diagrams/hand_eye.yaml`` (a plain wall, floor and
+table) the tracker holds 0-7 static corners outside the body cells (2 when the head turns at
+113 s: the table's right corners), fewer than a robust fit needs, so the detector stays silent
+there (measured; the lead has the figures).
 
 An *episode* runs from the first moving frame to ``rest_frames`` consecutive frames that do not
 move. Its frames' motions are composed; the episode is a **camera move** (the count ``moves``
-goes up, once per episode) as soon as the composed motion's displacement reaches ``move_px``.
+goes up, once per episode) as soon as it has ``min_frames`` moving frames (one frame's jump is a
+tracking glitch, a camera moves over frames) and the composed motion's displacement reaches
+``move_px``.
 
 Displacement of an image motion ``M``: the mean of ``||M p - p||`` over a 3 x 3 grid of image
 points (corners, edge midpoints, centre): a pan or tilt's image translation, a roll's mean arc.
@@ -49,20 +62,27 @@ import numpy as np
 class CameraMotionParams:
     """Thresholds of the camera-motion detector (px, frames, counts)."""
 
-    min_background: int = 20          # background features with a flow needed to judge a frame
+    min_background: int = 8           # anchors needed to judge a frame
+    anchor_time: float = 0.5          # s a feature must have been still against the scene to be an anchor
     inlier_px: float = 1.0            # RANSAC: a feature within this of the fitted motion is an inlier
     min_inlier_fraction: float = 0.6  # of the background: the consensus that is "the scene"
     still_px: float = 0.5             # per-frame displacement at or below this: not moving
+    feature_still_px: float = 0.2     # a feature's flow off the scene's motion above this: it moved
+    onset_window: float = 0.5         # s after an arm motion onset when no frame moves
+    arm_speed: float = 0.01           # rad/s: a joint faster than this moves the arm (Eq. (27)'s threshold)
     rest_frames: int = 3              # consecutive frames not moving that end an episode
+    min_frames: int = 2               # moving frames of an episode before it can be a camera move
     move_px: float = 3.0              # composed displacement of an episode that is a camera move
 
     def __post_init__(self):
+        times = (self.anchor_time, self.onset_window, self.arm_speed, self.feature_still_px)
         if not (self.min_background >= 3 and self.inlier_px > 0 and 0 < self.min_inlier_fraction <= 1
-                and self.still_px >= 0 and self.rest_frames >= 1 and self.move_px > self.still_px
-                and all(map(math.isfinite, (self.inlier_px, self.still_px, self.move_px)))):
-            raise ValueError(f"invalid camera motion parameters (min_background >= 3, inlier_px > 0, "
-                             f"0 < min_inlier_fraction <= 1, rest_frames >= 1, move_px > still_px >= 0): "
-                             f"{self}")
+                and self.still_px >= 0 and self.rest_frames >= 1 and self.min_frames >= 1
+                and self.move_px > self.still_px and all(x >= 0 for x in times)
+                and all(map(math.isfinite, (*times, self.inlier_px, self.still_px, self.move_px)))):
+            raise ValueError("invalid camera motion parameters (min_background >= 3, inlier_px > 0, "
+                             "0 < min_inlier_fraction <= 1, rest_frames and min_frames >= 1, "
+                             f"move_px > still_px >= 0, finite times and speeds >= 0): {self}")
 
 
 @dataclass(frozen=True)
@@ -85,19 +105,28 @@ class CameraMotionState:
 
     ``moving``: in an episode; ``moves``: camera moves so far; ``accumulated_px``: the displacement
     of the current (or last) episode's composed motion; ``M_episode``: that motion (3 x 3
-    homogeneous); ``declared``: the current episode was counted; ``rest``: frames not moving since
-    the last moving one; ``prev_ids``: the ids tracked in the last frame (sorted);
-    ``last_time``: that frame's time (a frame not newer is ignored)."""
+    homogeneous); ``declared``: the current episode was counted; ``frames``: its moving frames;
+    ``rest``: frames not moving since
+    the last moving one; ``ids`` and ``still_since``: the features tracked in the last frame (sorted
+    ids) and since when each has been still against the scene (s); ``last_time``: that frame's time
+    (a frame not newer is ignored); ``last``: that frame's verdict; ``joints_moving``,
+    ``arm_onset``, ``arm_still_since``: which joints moved at the last frame, the last actuator
+    onset and since when the arm has been at rest (s)."""
 
     moving: bool = False
     moves: int = 0
     accumulated_px: float = 0.0
     M_episode: np.ndarray = field(default_factory=lambda: np.eye(3))
     declared: bool = False
+    frames: int = 0
     rest: int = 0
-    prev_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    still_since: np.ndarray = field(default_factory=lambda: np.zeros(0))
     last_time: float = -math.inf
     last: FrameMotion | None = None
+    joints_moving: tuple = ()
+    arm_onset: float = -math.inf
+    arm_still_since: float = -math.inf
 
     def output(self) -> np.ndarray:
         """``[moving (0/1), moves, accumulated displacement (px)]``."""
@@ -117,10 +146,15 @@ def displacement(M: np.ndarray, points: np.ndarray) -> float:
     return float(np.mean(np.linalg.norm(moved - points, axis=1)))
 
 
-def background_mask(ids: np.ndarray, prev_ids: np.ndarray, robot: np.ndarray) -> np.ndarray:
-    """Features tracked in the previous frame too (``prev_ids``, sorted) and not the robot's."""
-    ids = np.asarray(ids, np.int64).ravel()
-    return np.isin(ids, prev_ids, assume_unique=False) & ~np.asarray(robot, bool).ravel()
+def still_since(state: CameraMotionState, ids: np.ndarray) -> np.ndarray:
+    """Per feature in ``ids``: since when it has been still against the scene (s), from the last
+    frame's memory; NaN for a feature not tracked in the last frame (no flow yet)."""
+    out = np.full(ids.shape[0], np.nan)
+    if state.ids.size:
+        pos = np.minimum(np.searchsorted(state.ids, ids), state.ids.size - 1)
+        known = state.ids[pos] == ids
+        out[known] = state.still_since[pos[known]]
+    return out
 
 
 def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionParams,
@@ -146,11 +180,12 @@ def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionPa
 
 
 def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarray, flow_px: np.ndarray,
-         robot: np.ndarray, params: CameraMotionParams, image_size: tuple[int, int]) -> CameraMotionState:
+         robot: np.ndarray, joints_moving: np.ndarray, params: CameraMotionParams,
+         image_size: tuple[int, int]) -> CameraMotionState:  # fmt: skip
     """One frame of tracked features at ``time`` (``ids``, ``p_px``, ``flow_px`` as in
-    ``optical_flow.TrackedFeatures``; ``robot``: per feature, a body feature or in a body cell).
-    ``image_size`` is (width, height). Returns the new state (``state`` itself for a frame not
-    newer than the last one)."""
+    ``optical_flow.TrackedFeatures``; ``robot``: per feature, a body feature or in a body cell;
+    ``joints_moving``: per actuator, it moves now). ``image_size`` is (width, height). Returns the new
+    state (``state`` itself for a frame not newer than the last one)."""
     if not time > state.last_time:
         return state
     ids = np.asarray(ids, np.int64).ravel()
@@ -158,20 +193,47 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
     flow_px = np.asarray(flow_px, float).reshape(-1, 2)
     robot = np.asarray(robot, bool).ravel()
     if not (p_px.shape[0] == flow_px.shape[0] == robot.shape[0] == ids.shape[0]):
-        raise ValueError(f"camera motion: {ids.shape[0]} ids, {p_px.shape[0]} pixels, {flow_px.shape[0]} flows, "
-                         f"{robot.shape[0]} robot flags: one per feature expected")  # fmt: skip
+        raise ValueError(f"camera motion: {ids.shape[0]} ids, {p_px.shape[0]} pixels, "
+                         f"{flow_px.shape[0]} flows, {robot.shape[0]} robot flags: one per feature expected")
     points = reference_points(*image_size)
-    usable = background_mask(ids, state.prev_ids, robot) & np.all(np.isfinite(p_px) & np.isfinite(flow_px), axis=1)
-    frame = frame_motion(p_px[usable] - flow_px[usable], p_px[usable], params, points)
-    new = replace(state, prev_ids=np.sort(ids), last_time=float(time), last=frame)
+    joints = tuple(bool(m) for m in np.asarray(joints_moving, bool).ravel())
+    previous = state.joints_moving if len(state.joints_moving) == len(joints) else (False,) * len(joints)
+    arm_moving = any(joints)
+    onset = any(m and not before for m, before in zip(joints, previous, strict=True))
+    arm_onset = time if onset else state.arm_onset
+    if arm_moving:
+        arm_still_since = math.inf
+    elif any(previous) or state.arm_still_since == math.inf:
+        arm_still_since = time  # it just stopped
+    else:
+        arm_still_since = state.arm_still_since
+    arm_at_rest = not arm_moving and time - arm_still_since >= params.anchor_time
+    since = still_since(state, ids)
+    p_prev = p_px - flow_px
+    finite = np.all(np.isfinite(p_px) & np.isfinite(flow_px), axis=1)
+    tracked = ~np.isnan(since)
+    still_long = time - np.where(tracked, since, time) >= params.anchor_time
+    anchors = finite & tracked & still_long & (arm_at_rest | ~robot)
+    frame = frame_motion(p_prev[anchors], p_px[anchors], params, points)
+    if time - arm_onset < params.onset_window:
+        frame = replace(frame, moving=False)
+    # Memory: a feature moving against the scene (its flow off the frame's motion, the identity
+    # unless the scene moves) restarts its still time; so does a feature seeded now.
+    M = frame.M if frame.moving else np.hstack([np.eye(2), np.zeros((2, 1))])
+    residual = np.linalg.norm(p_px - (p_prev @ M[:, :2].T + M[:, 2]), axis=1)
+    moved = residual > (params.inlier_px if frame.moving else params.feature_still_px)
+    since = np.where(np.isnan(since) | ~finite | moved, time, since)
+    order = np.argsort(ids)
+    new = replace(state, ids=ids[order], still_since=since[order], last_time=float(time), last=frame,
+                  joints_moving=joints, arm_onset=arm_onset, arm_still_since=arm_still_since)
     if frame.moving:
         M = np.vstack([frame.M, [0.0, 0.0, 1.0]])
         if not state.moving:  # onset: a new episode
-            new = replace(new, moving=True, declared=False, M_episode=np.eye(3))
+            new = replace(new, moving=True, declared=False, M_episode=np.eye(3), frames=0)
         M_episode = M @ new.M_episode
         accumulated = displacement(M_episode, points)
-        new = replace(new, M_episode=M_episode, accumulated_px=accumulated, rest=0)
-        if not new.declared and accumulated >= params.move_px:
+        new = replace(new, M_episode=M_episode, accumulated_px=accumulated, rest=0, frames=new.frames + 1)
+        if not new.declared and new.frames >= params.min_frames and accumulated >= params.move_px:
             new = replace(new, declared=True, moves=state.moves + 1)
         return new
     if state.moving:

@@ -19,6 +19,7 @@ class CoordinationStateMachine(LeafSystem):
         input_ports:
         - solution
         - observation
+        - camera_motion (optional)
         output_ports:
         - mode
         - adopted_x
@@ -31,7 +32,10 @@ class CoordinationStateMachine(LeafSystem):
     Inputs come from a ``SustainableIdentifierSystem``: ``solution`` (its abstract solution, with
     the verdict and ``a^2 lambda_N``) and ``observation`` (``[sample_count, s_t]``, where ``s_t``
     is the newest sample's error under ``adopted_x``: connect ``adopted_x`` to the identifier's
-    ``reference_x``).
+    ``reference_x``). ``camera_motion`` (optional, 2: ``[moving, moves]`` of a
+    ``CameraMotionDetector``; beyond the paper): a new camera move is a change detection and the
+    identifier is kept reset while the camera moves (``coordination.step``); unconnected, the
+    paper's rule alone.
 
     Outputs: ``mode`` (1: 0 IDENTIFY, 1 OBSERVE); ``adopted_x`` (N, zeros before the first
     convergence); ``adopted_solution`` (the identifier's solution at adoption, or None);
@@ -56,6 +60,7 @@ class CoordinationStateMachine(LeafSystem):
         self._rule = rule or CoordinationRule()
         self._solution_in = self.DeclareAbstractInputPort("solution", AbstractValue.Make(object()))
         self._observation = self.DeclareVectorInputPort("observation", 2)
+        self._camera_motion = self.DeclareVectorInputPort("camera_motion", 2)
         self._state = self.DeclareDiscreteState(coordination.initial_state())
         self._adopted_x = self.DeclareDiscreteState(np.zeros(num_unknowns))
         self._adopted = self.DeclareAbstractState(AbstractValue.Make(None))
@@ -102,10 +107,14 @@ class CoordinationStateMachine(LeafSystem):
     def _update(self, context, state) -> None:
         solution = self._solution_in.Eval(context)
         sample_count, sample_error = self._observation.Eval(context)
+        camera = {}
+        if self._camera_motion.HasValue(context):
+            moving, moves = self._camera_motion.Eval(context)
+            camera = {"camera_moving": bool(moving > 0.5), "camera_moves": int(moves)}
         new, event = coordination.step(
             self._vector(context), self._rule, context.get_time(), solution.verdict.converged,
             solution.expected_mse, int(sample_count), float(sample_error), int(solution.num_samples),
-            int(getattr(solution, "refinement", 0)),
+            int(getattr(solution, "refinement", 0)), **camera,
         )  # fmt: skip
         state.get_mutable_discrete_state(self._state).set_value(new)
         if event is not None:

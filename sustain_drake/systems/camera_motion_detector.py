@@ -1,0 +1,119 @@
+"""``CameraMotionDetector``: the camera notices its own motion from the static scene (beyond the
+paper). A thin Drake wrapper around :func:`sustain_drake.perception.camera_motion.step`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from sustain_drake.perception import camera_motion
+from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState
+from sustain_drake.perception.optical_flow import TrackedFeatures
+from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
+
+
+@dataclass(frozen=True)
+class _DetectorState:
+    """The detector's state and the actuator positions (and time) of the previous update."""
+
+    motion: CameraMotionState = field(default_factory=CameraMotionState)
+    q: np.ndarray | None = None
+    t: float = 0.0
+
+
+class CameraMotionDetector(LeafSystem):
+    """Declares a camera move when the static scene moves coherently in the image
+    (:mod:`sustain_drake.perception.camera_motion` documents the rule and its thresholds).
+
+    .. pydrake_system::
+
+        name: CameraMotionDetector
+        input_ports:
+        - tracked_features
+        - feature_on_body
+        - body_feature_cells (optional)
+        - actuator_positions
+        output_ports:
+        - camera_motion
+        - accumulated_displacement
+
+    Inputs: ``tracked_features`` (``TrackedFeatures`` of the ``OpticalFlowTracker``: the tracks'
+    own pixels and flows), ``feature_on_body`` (``FeatureBodyFlags`` of the
+    ``MotionCoincidenceDetector`` for the same features: a body feature or one in a body cell is
+    the robot's), ``body_feature_cells`` (the detector's cells holding a body feature now, size
+    ``num_cells``; unconnected: not used), ``actuator_positions`` (rad, size ``num_actuators``: a
+    joint moves when its speed over the last period exceeds ``params.arm_speed``).
+
+    Outputs: ``camera_motion`` (2, ``[moving, moves]``: 1 while a scene-motion episode lasts, and
+    the number of camera moves declared so far; connect to ``CoordinationStateMachine``'s
+    ``camera_motion``), ``accumulated_displacement`` (1, px: the current or last episode's
+    composed image displacement).
+
+    Every ``period`` s (offset ``offset``: after the coincidence detector's update of the same
+    frame) a periodic unrestricted update runs one step on a new frame (a frame time not newer
+    than the last is skipped). State: one abstract value (the rule's ``CameraMotionState`` and the
+    previous actuator positions).
+    """
+
+    def __init__(self, num_actuators: int, num_cells: int, image_size: tuple[int, int],
+                 params: CameraMotionParams | None = None, period: float = 1.0 / 30.0,
+                 offset: float = 0.0):  # fmt: skip
+        super().__init__()
+        if not (np.isfinite(period) and period > 0):
+            raise ValueError(f"period must be positive, got {period}")
+        self._params = params or CameraMotionParams()
+        self._size = (int(image_size[0]), int(image_size[1]))
+        self._n_c = int(num_cells)
+        self._features = self.DeclareAbstractInputPort(
+            "tracked_features", AbstractValue.Make(TrackedFeatures()))
+        self._flags = self.DeclareAbstractInputPort("feature_on_body", AbstractValue.Make(FeatureBodyFlags()))
+        self._cells = self.DeclareVectorInputPort("body_feature_cells", self._n_c)
+        self._q = self.DeclareVectorInputPort("actuator_positions", int(num_actuators))
+        self._state = self.DeclareAbstractState(AbstractValue.Make(_DetectorState()))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update)
+        state = {self.all_state_ticket()}
+        self.DeclareVectorOutputPort("camera_motion", 2, lambda c, o: o.SetFromVector(
+            self.motion_state(c).output()[:2]), prerequisites_of_calc=state)  # fmt: skip
+        self.DeclareVectorOutputPort("accumulated_displacement", 1, lambda c, o: o.SetAtIndex(
+            0, self.motion_state(c).accumulated_px), prerequisites_of_calc=state)  # fmt: skip
+
+    @property
+    def params(self) -> CameraMotionParams:
+        return self._params
+
+    def motion_state(self, context) -> CameraMotionState:
+        """The rule's state in ``context`` (read only)."""
+        return context.get_abstract_state(self._state).get_value().motion
+
+    def _update(self, context, state) -> None:
+        old = context.get_abstract_state(self._state).get_value()
+        t, q = context.get_time(), np.array(self._q.Eval(context), float)
+        joints_moving = np.zeros(q.size, bool)
+        if old.q is not None and old.q.size == q.size and t > old.t:
+            joints_moving = np.abs(q - old.q) / (t - old.t) > self._params.arm_speed
+        new = replace(old, q=q, t=t)
+        if self._features.HasValue(context):
+            f = self._features.Eval(context)
+            robot = self._robot(context, f)
+            new = replace(new, motion=camera_motion.step(
+                old.motion, f.time, f.ids, f.p_px, f.flow_px, robot, joints_moving, self._params, self._size))
+        state.get_mutable_abstract_state(self._state).set_value(new)
+
+    def _robot(self, context, f: TrackedFeatures) -> np.ndarray:
+        """Per feature: a body feature, in a body cell or in a cell holding a body feature."""
+        robot = np.zeros(len(f), bool)
+        if self._flags.HasValue(context):
+            flags = self._flags.Eval(context)
+            if not np.array_equal(flags.ids, f.ids):
+                raise ValueError("CameraMotionDetector: feature_on_body is not for the tracked_features "
+                                 "input (connect both to the same tracker)")
+            robot |= np.asarray(flags.on_body, bool) | np.asarray(flags.in_body_cell, bool)
+        if self._cells.HasValue(context):
+            cells = np.asarray(self._cells.Eval(context)) > 0.5
+            cell = np.asarray(f.cell, np.int64)
+            inside = (cell >= 0) & (cell < self._n_c)
+            robot[inside] |= cells[cell[inside]]
+        return robot

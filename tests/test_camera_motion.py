@@ -1,0 +1,216 @@
+"""The camera notices its own motion from the static scene (perception.camera_motion), on synthetic
+feature sets, and its Drake system."""
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantVectorSource
+
+from sustain_drake.perception import camera_motion
+from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState
+from sustain_drake.perception.optical_flow import TrackedFeatures
+from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
+from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
+
+SIZE = (320, 240)
+FPS = 30.0
+PARAMS = CameraMotionParams()
+
+
+class Scene:
+    """Tracked features of a synthetic scene: ``groups`` name -> (pixels K x 2, robot flag); each
+    frame every group moves by its own per-frame motion (a callable of the pixels)."""
+
+    def __init__(self, seed=0, background=40, person=12, robot=15):
+        rng = np.random.default_rng(seed)
+        self.rng = rng
+        self.groups = {
+            "background": [rng.uniform([10, 10], [310, 230], (background, 2)), False],
+            "person": [rng.uniform([200, 40], [240, 200], (person, 2)), False],
+            "robot": [rng.uniform([120, 60], [180, 200], (robot, 2)), True],
+        }
+        self.ids = {}
+        next_id = 0
+        for name, (p, _) in self.groups.items():
+            self.ids[name] = np.arange(next_id, next_id + len(p))
+            next_id += len(p)
+
+    def frame(self, motions):
+        """Moves each group by ``motions[name]`` (a function of its pixels, default still) and
+        returns (ids, p_px, flow_px, robot) of the new frame."""
+        ids, p, flow, robot = [], [], [], []
+        for name, group in self.groups.items():
+            before = group[0]
+            after = motions.get(name, lambda q: q)(before)
+            group[0] = after
+            ids.append(self.ids[name])
+            p.append(after)
+            step = after - before
+            step[np.linalg.norm(step, axis=1) < 0.2] = 0.0  # the tracker's min_flow_px
+            flow.append(step)
+            robot.append(np.full(len(after), group[1]))
+        return np.concatenate(ids), np.vstack(p), np.vstack(flow), np.concatenate(robot)
+
+
+def shift(d):
+    return lambda q: q + np.asarray(d, float)
+
+
+def run(scene, frames, motions_of_k, arm_moving_of_k=lambda k: False, state=None, start=0, params=PARAMS):
+    """Runs ``frames`` frames; returns the final state and the per-frame outputs."""
+    state = state or CameraMotionState()
+    outputs = []
+    for k in range(start, start + frames):
+        ids, p, flow, robot = scene.frame(motions_of_k(k))
+        state = camera_motion.step(state, k / FPS, ids, p, flow, robot, arm_moving_of_k(k), params, SIZE)
+        outputs.append(state.output())
+    return state, np.array(outputs)
+
+
+def walking_person(k):
+    return {"person": shift([3.0, 0.2])}
+
+
+def test_a_camera_pan_is_one_move_despite_a_walking_person_and_a_moving_arm():
+    scene = Scene()
+    arm = {"robot": lambda q: q + np.array([2.5, -1.0]) + 0.02 * (q - 150)}  # the arm's own motion
+
+    def motions(k):
+        m = {**walking_person(k), **arm}
+        if 30 <= k < 45:  # the camera pans and tilts: everything moves by (2, 1.5) px per frame more
+            for name in m:
+                m[name] = (lambda f: lambda q: f(q) + [2.0, 1.5])(m[name])
+            m["background"] = shift([2.0, 1.5])
+        return m
+
+    state, out = run(scene, 30, motions, lambda k: True)
+    assert state.moves == 0 and not state.moving  # a person and the arm alone: nothing
+    state, out = run(scene, 15, motions, lambda k: True, state, start=30)
+    assert state.moves == 1 and state.moving
+    # Declared as soon as the composed motion reaches move_px (2.5 px per frame: on the 2nd frame).
+    assert np.flatnonzero(out[:, 1] == 1)[0] == 1
+    assert state.accumulated_px == pytest.approx(15 * np.hypot(2.0, 1.5), rel=0.02)
+    state, out = run(scene, 10, motions, lambda k: True, state, start=45)
+    assert state.moves == 1 and not state.moving
+    assert np.flatnonzero(out[:, 0] == 0)[0] == PARAMS.rest_frames - 1  # the episode ends at rest
+
+
+def test_the_person_alone_the_robot_alone_or_a_few_outliers_never_move_the_camera():
+    scene = Scene(seed=1)
+    # The person walks through for 5 s, even across most of the image.
+    state, out = run(scene, 150, walking_person)
+    assert out[:, 1].max() == 0 and out[:, 0].max() == 0
+    # The arm rests 1 s then moves: its features (unflagged ones too) rested long enough to be anchors.
+    scene = Scene(seed=2, background=10, robot=25)
+    scene.groups["robot"][1] = False  # not yet known as the body (no body cells yet)
+
+    def arm_after_rest(k):
+        return {"robot": shift([2.0, 1.0])} if k >= 30 else {}
+
+    state, out = run(scene, 90, arm_after_rest, lambda k: k >= 30)
+    assert out[:, 1].max() == 0
+    # A few background features jitter (tracking outliers): 5 of 40.
+    scene = Scene(seed=3, person=0, robot=0)
+    rng = np.random.default_rng(4)
+
+    def outliers(k):
+        def jitter(q):
+            q = q.copy()
+            q[:5] += rng.normal(0, 3.0, (5, 2))
+            return q
+        return {"background": jitter}
+
+    state, out = run(scene, 150, outliers)
+    assert out[:, 1].max() == 0 and out[:, 0].max() == 0
+
+
+def test_too_few_background_features_never_judge_a_frame():
+    scene = Scene(seed=5, background=PARAMS.min_background - 1, person=0, robot=0)
+    state, _ = run(scene, 30, lambda k: {})
+    state, out = run(scene, 30, lambda k: {"background": shift([3.0, 0.0])}, state=state, start=30)
+    assert out[:, 1].max() == 0 and not state.last.judged
+
+
+def test_a_resting_arm_is_static_scene_and_a_small_move_is_not_a_camera_move():
+    """With the arm at rest its body features are anchors (a body at rest is static scene); a
+    camera move below move_px is an episode but no camera move."""
+    scene = Scene(seed=6, background=3, person=0, robot=20)
+    state, _ = run(scene, 30, lambda k: {})
+    state, out = run(scene, 2, lambda k: {"background": shift([1.2, 0]), "robot": shift([1.2, 0])},
+                     state=state, start=30)  # fmt: skip
+    assert out[-1, 0] == 1 and state.moves == 0 and state.accumulated_px == pytest.approx(2.4, rel=0.02)
+    state, out = run(scene, 5, lambda k: {}, state=state, start=32)
+    assert state.moves == 0 and not state.moving
+    # The same arm moving (not at rest): its body features are not the scene; 3 anchors are too few.
+    state, out = run(scene, 10, lambda k: {"background": shift([3.0, 0]), "robot": shift([3.0, 0])},
+                     lambda k: True, state=state, start=37)  # fmt: skip
+    assert state.moves == 0
+
+
+def test_bad_input_and_parameters():
+    with pytest.raises(ValueError, match="camera motion parameters"):
+        CameraMotionParams(move_px=0.1, still_px=0.5)
+    with pytest.raises(ValueError, match="one per feature"):
+        camera_motion.step(CameraMotionState(), 0.0, np.arange(3), np.zeros((3, 2)), np.zeros((2, 2)),
+                           np.zeros(3, bool), False, PARAMS, SIZE)  # fmt: skip
+    # A frame not newer than the last is skipped.
+    state = camera_motion.step(CameraMotionState(), 1.0, np.arange(3), np.zeros((3, 2)), np.zeros((3, 2)),
+                               np.zeros(3, bool), False, PARAMS, SIZE)  # fmt: skip
+    assert camera_motion.step(state, 1.0, np.arange(2), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(2, bool),
+                              False, PARAMS, SIZE) is state  # fmt: skip
+
+
+class ScriptedFeatures(LeafSystem):
+    """Tracked features of a 40-point static scene, at 30 Hz, panned by 2 px per frame from 1.0 to
+    1.5 s; the feature flags (none on the body) beside them."""
+
+    def __init__(self):
+        super().__init__()
+        rng = np.random.default_rng(7)
+        self._p0 = rng.uniform([10, 10], [310, 230], (40, 2))
+        self.DeclareAbstractOutputPort("tracked_features", lambda: AbstractValue.Make(TrackedFeatures()),
+                                       self._features)  # fmt: skip
+        self.DeclareAbstractOutputPort("feature_on_body", lambda: AbstractValue.Make(FeatureBodyFlags()),
+                                       self._flags)  # fmt: skip
+
+    @staticmethod
+    def _offset(k):
+        return 2.0 * np.clip(k - 30, 0, 15)
+
+    def _features(self, context, output):
+        k = int(np.floor(context.get_time() * FPS + 1e-9))
+        p = self._p0 + [self._offset(k), 0.0]
+        flow = np.tile([self._offset(k) - self._offset(k - 1), 0.0], (40, 1))
+        output.set_value(TrackedFeatures(ids=np.arange(40), p_px=p, flow_px=flow, p_CP=np.zeros((40, 3)),
+                                         valid=np.zeros(40, bool), cell=np.zeros(40, np.int64), time=k / FPS))
+
+    def _flags(self, context, output):
+        output.set_value(FeatureBodyFlags(ids=np.arange(40), on_body=np.zeros(40, bool),
+                                          in_body_cell=np.zeros(40, bool), actuator=np.full(40, -1)))
+
+
+def test_the_system_declares_one_move_and_its_context_clones():
+    builder = DiagramBuilder()
+    scene = builder.AddSystem(ScriptedFeatures())
+    detector = builder.AddSystem(CameraMotionDetector(5, 192, SIZE, period=1.0 / FPS, offset=0.5 / FPS))
+    q = builder.AddSystem(ConstantVectorSource(np.zeros(5)))
+    for name in ("tracked_features", "feature_on_body"):
+        builder.Connect(scene.GetOutputPort(name), detector.GetInputPort(name))
+    builder.Connect(q.get_output_port(), detector.GetInputPort("actuator_positions"))
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(1.02)
+    context = detector.GetMyContextFromRoot(simulator.get_context())
+    assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [0.0, 0.0]
+    saved = simulator.get_context().Clone()
+    simulator.AdvanceTo(1.2)
+    context = detector.GetMyContextFromRoot(simulator.get_context())
+    assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [1.0, 1.0]
+    simulator.AdvanceTo(2.0)
+    assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [0.0, 1.0]
+    displacement = detector.GetOutputPort("accumulated_displacement").Eval(context)[0]
+    assert displacement == pytest.approx(30.0, rel=1e-6)
+    # The cloned context kept its own state (nothing in Python attributes).
+    clone = detector.GetMyContextFromRoot(saved)
+    assert list(detector.GetOutputPort("camera_motion").Eval(clone)) == [0.0, 0.0]
