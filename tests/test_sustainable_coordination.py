@@ -15,6 +15,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
 
+from sustain_drake.experiments.hand_eye_config import HandEyeConfig
 from sustain_drake.identification import coordination
 from sustain_drake.sustainable_coordination import make_sustainable_coordination
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
@@ -201,3 +202,25 @@ def test_hand_pose_from_a_plant_with_other_bodies_reads_the_arm_instance_only():
     assert not fk.GetOutputPort("X_WH").Eval(context).IsNearlyEqualTo(expected, 1e-6)
     with pytest.raises(ValueError, match="finalized"):
         HandPoseFromPlant(MultibodyPlant(0.0), plant.world_frame())
+
+
+def test_the_camera_motion_detector_is_optional_and_exported():
+    """``hand_eye.camera_motion.enabled`` adds the camera-motion detector (fed by the same joint
+    positions as the coincidence detector) and its ``camera_motion`` output; off, neither."""
+    info = CameraInfo(160, 120, 1.0)
+    assert not make_sustainable_coordination(info, 6).HasOutputPort("camera_motion")
+    config = HandEyeConfig()
+    config.camera_motion.enabled = True
+    diagram = make_sustainable_coordination(info, 6, hand_eye=config)
+    context = diagram.CreateDefaultContext()
+    diagram.GetInputPort("color_image").FixValue(context, ImageRgba8U(160, 120))
+    diagram.GetInputPort("depth_image").FixValue(context, ImageDepth32F(160, 120))
+    diagram.GetInputPort("joint_positions").FixValue(context, np.zeros(6))
+    diagram.GetInputPort("joint_velocities").FixValue(context, np.zeros(6))
+    diagram.GetInputPort("X_WH").FixValue(context, RigidTransform())
+    diagram.GetInputPort("wrench").FixValue(context, np.zeros(6))
+    simulator = Simulator(diagram, context)
+    simulator.AdvanceTo(0.2)  # blank frames: nothing tracked, nothing moves
+    assert list(diagram.GetOutputPort("camera_motion").Eval(context)) == [0.0, 0.0]
+    camera = diagram.GetSubsystemByName("camera_motion_detector")
+    assert camera.GetInputPort("actuator_positions").size() == 6
