@@ -32,13 +32,14 @@ def checker(width: int, height: int, cols: int, rows: int, colors) -> np.ndarray
     return img
 
 
-# The rod (hand_eye.yaml): 50 mm square, 0.3 m long. Each side face is black with yellow squares
-# of 0.6 times the face's width (30 mm, ~11 px at 320x240 and 0.75 m) on its centre line, one every
-# 60 mm along the rod, so that every image corner on it is the corner of a square: a point fixed on
-# the rod's surface, 10 mm inside the face's edges. The long edges are plain black (a silhouette against the background is a
-# straight edge, no corner), and so are the rod's ends. A 25 mm checker bar (the first version) was
-# ~7 px wide at 320x240: its corners were silhouette corners that slid along the bar and onto the
-# background, and the depth there mixed rod and background (bench/bench_hand_eye_candidates.py).
+# The rod (hand_eye.yaml): 50 mm square, 0.3 m long. Each side face is black with a two-column
+# yellow checker of 18 mm x 25 mm cells between 7 mm plain margins, so that every image corner on
+# it is a checker saddle on the face's centre line or a cell corner 7 mm inside the face's edge: a
+# point fixed on the rod's surface. The long edges are plain black (a silhouette against the
+# background is a straight edge, no corner), and so are the rod's ends. A 25 mm checker bar (the
+# first version) was ~7 px wide at 320x240: its corners were silhouette corners that slid along the
+# bar and onto the background, and the depth there mixed rod and background
+# (bench/bench_hand_eye_candidates.py).
 ROD_WIDTH = 0.050  # m
 ROD_LENGTH = 0.300  # m
 ROD_TEXEL = 0.0005  # m per texture pixel
@@ -60,6 +61,36 @@ def rod_texture(light, dark) -> np.ndarray:
         u0 = margin + c * cell
         img[r * row:(r + 1) * row, u0:u0 + cell] = light
     return img
+
+
+# The backdrop (scenario key ``backdrop``): posters on the back wall, so the static scene has corners
+# of its own (a camera that turns sees them all move together; a plain wall shows none). Each poster
+# is a light sheet with a few dark blocks; seen from the head, 4 m away at 320x240 (14 mm per pixel),
+# the blocks are 7-25 px.
+BACKDROP_SIZE = (6.0, 2.0)  # m, width (world y) x height (world z)
+BACKDROP_TEXEL = 0.005  # m per texture pixel
+
+
+def backdrop_texture(seed: int = 0) -> np.ndarray:
+    """A wall of posters (u along the wall, v up), drawn from a fixed seed."""
+    rng = np.random.default_rng(seed)
+    width, height = (round(x / BACKDROP_TEXEL) for x in BACKDROP_SIZE)
+    img = np.empty((height, width, 3), np.uint8)
+    img[:] = (200, 198, 190)
+    posters = 0
+    while posters < 28:
+        w, h = (int(rng.integers(60, 110)), int(rng.integers(70, 130)))
+        u, v = int(rng.integers(0, width - w)), int(rng.integers(0, height - h))
+        if (img[v - 10 if v >= 10 else 0:v + h + 10, max(u - 10, 0):u + w + 10] != img[0, 0]).any():
+            continue  # keep posters apart: each corner belongs to one
+        sheet = tuple(int(x) for x in rng.integers(215, 250, 3))
+        img[v:v + h, u:u + w] = sheet
+        for _ in range(int(rng.integers(2, 5))):
+            bw, bh = int(rng.integers(12, w // 2)), int(rng.integers(12, h // 2))
+            bu, bv = u + int(rng.integers(4, w - bw - 4)), v + int(rng.integers(4, h - bh - 4))
+            img[bv:bv + bh, bu:bu + bw] = tuple(int(x) for x in rng.integers(10, 140, 3))
+        posters += 1
+    return np.ascontiguousarray(img[::-1])  # image rows run down, v up
 
 
 def box_obj(name: str, size, center=(0.0, 0.0, 0.0), plain_axis: int | None = None,
@@ -122,6 +153,8 @@ def main() -> None:
     white, blue = (235, 235, 235), (30, 60, 200)
     write("box", box_obj("box", (0.2, 0.15, 0.12), center=(0, 0, 0.06)),
           checker(256, 256, 4, 4, (white, blue)))
+    # Backdrop: a 2 cm panel; only its front face (+x, toward the head) is seen.
+    write("backdrop", box_obj("backdrop", (0.02, *BACKDROP_SIZE)), backdrop_texture())
 
 
 if __name__ == "__main__":

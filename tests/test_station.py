@@ -257,3 +257,31 @@ def test_gravity_compensation_holds_the_arm_up():
     uncompensated, compensated = _sag_at_rest(False), _sag_at_rest(True)
     assert uncompensated > 0.005
     assert compensated < 0.25 * uncompensated
+
+
+def test_backdrop_gives_the_static_scene_corners():
+    """The posters (``backdrop.enabled``) sit on the back wall, ~4 m from the head, and give the
+    image's static upper part (above the arm, which stays below the wall's horizon line here)
+    Shi-Tomasi corners, where the plain wall has none."""
+    import cv2
+
+    def upper_corners_and_depth(enabled: bool):
+        s = Scenario()
+        s.camera.width, s.camera.height, s.camera.label = 320, 240, False
+        s.distractor.enabled = False
+        s.backdrop.enabled = enabled
+        diagram = build_station(s)
+        context = simulate(diagram, 0.1)
+        color = diagram.GetOutputPort("color_image").Eval(context).data[:, :, :3]
+        depth = diagram.GetOutputPort("depth_image").Eval(context).data[:, :, 0]
+        gray = cv2.cvtColor(np.ascontiguousarray(color), cv2.COLOR_RGB2GRAY)
+        upper = np.zeros_like(gray)
+        upper[:60] = 255  # the top quarter: wall only (the arm's tip stays lower)
+        corners = cv2.goodFeaturesToTrack(gray, 300, 0.01, 8, mask=upper)
+        return 0 if corners is None else len(corners), np.median(depth[:60])
+
+    plain, plain_depth = upper_corners_and_depth(False)
+    posters, posters_depth = upper_corners_and_depth(True)
+    assert plain <= 2 < 20 <= posters
+    # The posters are on the wall: the same depth within their 3 cm offset and the depth noise.
+    assert 3.5 < posters_depth < 5.0 and abs(posters_depth - plain_depth) < 0.1

@@ -56,6 +56,9 @@ from sustain_drake.systems.wrench_sensor import GripperCompensation, WristWrench
 # arm stands on the table's 0.25 m pedestal).
 X_W_TABLE = RigidTransform([0.25, 0.0, 0.0])
 X_W_ARM = RigidTransform([0.0, 0.0, 0.25])
+# The posters' panel, its poster face 3 cm in front of the back wall's (world x = -2.725), its
+# lower edge 0.3 m below the table top.
+X_W_BACKDROP = RigidTransform([-2.705, 0.0, 0.7])
 TOOL_FILES = {"rod": "rod_tool.sdf", "box": "box_tool.sdf"}
 # The grip is two stiff PD joints (slide along the grasp z, pivot about the closing axis x):
 # a tool slip is a fast move of these joints to new set points.
@@ -214,6 +217,9 @@ def _add_world(builder: DiagramBuilder, scenario: Scenario) -> _World:
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table), X_W_TABLE)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("head_post", head),
                      _deterministic(scenario.head.X_WP, "head.X_WP"))
+    if scenario.backdrop.enabled:
+        backdrop = parser.AddModels(model_file("backdrop.sdf"))[0]
+        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("backdrop", backdrop), X_W_BACKDROP)
     person = None
     if scenario.distractor.enabled:
         person = parser.AddModels(model_file("person.sdf"))[0]

@@ -146,6 +146,15 @@ class DistractorConfig:
 
 
 @dataclasses.dataclass
+class BackdropConfig:
+    """Posters on the back wall (``models/backdrop.sdf``): a static scene with corners of its own,
+    as a lab wall has (the default room's wall, floor and table show only a few). Off by
+    default; the hand-eye scenarios use it (a camera that turns sees the posters move together)."""
+
+    enabled: bool = False
+
+
+@dataclasses.dataclass
 class ToolSlip:
     """At ``time`` the tool slips in the gripper, within ``duration``, to a new slip state:
     ``slide`` (m) along the grasp frame's z and ``pivot`` (rad) about its x (the finger
@@ -232,6 +241,7 @@ class Scenario:
     wrench_sensor: WrenchSensorConfig = field(default_factory=WrenchSensorConfig)
     depth_noise: DepthNoiseConfig = field(default_factory=DepthNoiseConfig)
     distractor: DistractorConfig = field(default_factory=DistractorConfig)
+    backdrop: BackdropConfig = field(default_factory=BackdropConfig)
     disturbances: list[ToolSlip | HeadMove | Touch] = field(default_factory=list)
     touch_motion: TouchMotionConfig = field(default_factory=TouchMotionConfig)
     # The experiments run on this world (``sustain_drake.experiments``); each is off by default.
