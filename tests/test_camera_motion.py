@@ -102,17 +102,23 @@ def test_the_person_alone_the_robot_alone_or_a_few_outliers_never_move_the_camer
     # The person walks through for 5 s, even across most of the image.
     state, out = run(scene, 150, walking_person)
     assert out[:, 1].max() == 0 and out[:, 0].max() == 0
-    # The arm rests 1 s then moves: its features (unflagged ones too) rested long enough to be anchors.
-    scene = Scene(seed=2, background=10, robot=25)
-    scene.groups["robot"][1] = False  # not yet known as the body (no body cells yet)
+    # The arm rests 1 s (its body features are anchors then: a body at rest is static scene) and
+    # moves: it outnumbers the static scene, but a moving arm's body features are not the scene.
+    scene = Scene(seed=2, background=25, person=0, robot=40)
 
     def arm_after_rest(k):
         return {"robot": shift([2.0, 1.0])} if k >= 30 else {}
 
     state, out = run(scene, 90, arm_after_rest, lambda k: k >= 30)
-    assert out[:, 1].max() == 0
+    assert out[:, 1].max() == 0 and out[:, 0].max() == 0
+    # Unflagged features of the arm (not yet known as the body) that rested: a minority of the
+    # anchors, they do not make the consensus.
+    scene = Scene(seed=3, background=30, person=0, robot=15)
+    scene.groups["robot"][1] = False
+    state, out = run(scene, 90, arm_after_rest, lambda k: k >= 30)
+    assert out[:, 1].max() == 0 and out[:, 0].max() == 0
     # A few background features jitter (tracking outliers): 5 of 40.
-    scene = Scene(seed=3, person=0, robot=0)
+    scene = Scene(seed=4, person=0, robot=0)
     rng = np.random.default_rng(4)
 
     def outliers(k):
