@@ -11,12 +11,23 @@ loop's identifiers got). With ``--refine`` the mapped points are the refined one
 (``perception.point_refinement`` with the scenario's ``hand_eye.refinement``) rather than the
 tracker's own.
 
-    .venv/bin/python bench/bench_hand_eye_candidates.py [--duration 30] [--refine] [--scenario S]
+Then, against the TRUE 3-D position of the mark each candidate tracks: the rod's checker corners
+and cell centres are known in the tool frame (``models/generate_assets.py``: 50 mm square, two
+18 mm columns between 7 mm margins, 25 mm rows), so each candidate's median ``p_H`` is snapped to
+the nearest such mark, and every sample's error ``p_CP - X_CW X_WH p_H(mark)`` is split into its component
+along the camera ray (depth) and across it. Printed for three versions of the same features'
+points, on the same frames: the tracker's, the refined ones with the window's median depth, and
+the refined ones with the depth on the face's plane at the sub-pixel point (``depth_plane``):
+the mean along the ray (the bias that shifts the camera along its optical axis) and the RMS.
+
+    .venv/bin/python bench/bench_hand_eye_candidates.py [--duration 30] [--refine] [--scenario S] [--seed N]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import importlib.util
 import math
 from pathlib import Path
 
@@ -24,6 +35,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from sustain_drake.cli.simulate import apply_seed
 from sustain_drake.experiments import hand_eye
 from sustain_drake.identification.candidates import (
     best_p_HP_given_camera,
@@ -37,10 +49,41 @@ from sustain_drake.station import build_station, camera_info, load_scenario
 from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
 
 ROOT = Path(__file__).resolve().parents[1]
+VARIANTS = ("tracker", "median depth", "plane depth")
 
 
-def run(scenario_path: Path, duration: float, refinement: RefinementParams | None = None) -> dict:
+def rod_marks_T() -> np.ndarray:
+    """Every point of the rod's side faces that an image feature can be fixed on, in the tool frame T
+    (M x 3, m): the checker's corners (across at the column edges: margin, margin + cell and
+    margin + 2 cells from one edge; along at every row boundary) and its cells' centres (a yellow
+    cell is 6-7 x 7-9 px at 0.7-0.8 m: a blob whose centre ``cornerSubPix`` finds). The rod spans z
+    in [-0.05, 0.25] (centre at z = 0.1)."""
+    spec = importlib.util.spec_from_file_location("generate_assets", ROOT / "models" / "generate_assets.py")
+    assets = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(assets)
+    half = assets.ROD_WIDTH / 2
+    rows = round(assets.ROD_LENGTH / assets.ROD_ROW)
+    z0 = 0.1 - assets.ROD_LENGTH / 2
+    corners = [(a, z) for a in -half + assets.ROD_MARGIN + assets.ROD_CELL * np.arange(3)
+               for z in z0 + assets.ROD_ROW * np.arange(1, rows)]
+    centres = [(a, z) for a in -half + assets.ROD_MARGIN + assets.ROD_CELL * (np.arange(2) + 0.5)
+               for z in z0 + assets.ROD_ROW * (np.arange(rows) + 0.5)]
+    out = []
+    for sign in (-1.0, 1.0):
+        for a, z in corners + centres:
+            out += [(sign * half, a, z), (a, sign * half, z)]
+    return np.array(out)
+
+
+def run(scenario_path: Path, duration: float, refinement: RefinementParams | None = None,
+        compare: RefinementParams | None = None, seed: int | None = None) -> dict:
+    """The loop's candidates' points over ``duration`` s: ``tracks[id]`` rows of (time, p_H with the
+    true camera, rod tip, p_CP, X_WH) for the ``refinement``'s points (the tracker's if None), and
+    ``versions[id]`` rows of (X_CH true, {variant: p_CP or None}) for the three ``VARIANTS`` (the
+    refined ones with ``compare``'s other settings)."""
     scenario = load_scenario(scenario_path)
+    if seed is not None:
+        apply_seed(scenario, seed)
     builder = DiagramBuilder()
     station = builder.AddSystem(build_station(scenario))
     handle = hand_eye.add_to_diagram(builder, station, scenario, None)
@@ -49,6 +92,11 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
     root = simulator.get_context()
     period = 1.0 / scenario.camera.fps
     tracks: dict[int, list] = {}
+    versions: dict[int, list] = {}
+    compare = compare or RefinementParams()
+    by_depth = {"median depth": dataclasses.replace(compare, depth_plane=False),
+                "plane depth": dataclasses.replace(compare, depth_plane=True)}
+    plant = station.GetSubsystemByName("plant")
     seen_candidates: dict[int, object] = {}
     last_frame = -1.0
     t = 0.0
@@ -74,12 +122,21 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
             seen_candidates[c.feature_id] = c
         row = {int(i): k for k, i in enumerate(features.ids)}
         refined, refined_ok = np.zeros((0, 3)), np.zeros(0, bool)
-        if refinement is not None and station.GetOutputPort("image_time").Eval(sc)[0] == features.time:
-            refined, refined_ok = refine_points(station.GetOutputPort("color_image").Eval(sc).data,
-                                                station.GetOutputPort("depth_image").Eval(sc).data,
-                                                features.p_px, info, refinement)
+        both = {}
+        if station.GetOutputPort("image_time").Eval(sc)[0] == features.time:
+            color = station.GetOutputPort("color_image").Eval(sc).data
+            depth = station.GetOutputPort("depth_image").Eval(sc).data
+            if refinement is not None:
+                refined, refined_ok = refine_points(color, depth, features.p_px, info, refinement)
+            both = {name: refine_points(color, depth, features.p_px, info, params)
+                    for name, params in by_depth.items()}
+        X_CH = np.linalg.inv(X_WC) @ X_WH
         for fid in {c.feature_id for c in bank.candidates}:
             k = row.get(fid)
+            if k is not None and both:
+                points = {"tracker": features.p_CP[k].copy() if features.valid[k] else None}
+                points.update({name: p[k].copy() if ok[k] else None for name, (p, ok) in both.items()})
+                versions.setdefault(fid, []).append((X_CH, points))
             if refinement is not None:
                 if k is None or k >= refined_ok.size or not refined_ok[k]:
                     continue
@@ -93,19 +150,57 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
             tracks.setdefault(fid, []).append((features.time, p_H, tip, p_CP.copy(), X_WH.copy()))
     sc = station.GetMyContextFromRoot(root)
     X_WC = station.GetOutputPort("true_X_WC").Eval(sc).GetAsMatrix4()
-    return {"tracks": tracks, "candidates": seen_candidates, "X_WC": X_WC,
+    pc = plant.GetMyContextFromRoot(root)
+    X_WT = plant.EvalBodyPoseInWorld(pc, plant.GetBodyByName("tool")).GetAsMatrix4()
+    X_WH_now = station.GetOutputPort("X_WH").Eval(sc).GetAsMatrix4()
+    return {"tracks": tracks, "candidates": seen_candidates, "X_WC": X_WC, "versions": versions,
+            "X_HT": np.linalg.inv(X_WH_now) @ X_WT,
             "bank": handle.candidates.bank(handle.candidates.GetMyContextFromRoot(root))}
+
+
+def errors_against_true_marks(out: dict, max_snap: float = 0.0045) -> dict:
+    """Per candidate whose true-camera ``p_H`` (median over its frames) lies within ``max_snap`` (half
+    the 9 mm between a cell's centre and its edge) of a checker mark (``rod_marks_T``), and per
+    variant: every sample's error against that mark, split along the camera ray and across it:
+    ``{"errors": {variant: {id: (along (n,), across (n,))}}, "snaps": {id: distance}}``."""
+    marks = rod_marks_T()
+    marks_H = (out["X_HT"] @ np.c_[marks, np.ones(len(marks))].T).T[:, :3]
+    result = {v: {} for v in VARIANTS}
+    snaps = {}
+    for fid, rows in out["tracks"].items():
+        median = np.median(np.array([r[1] for r in rows]), axis=0)
+        d = np.linalg.norm(marks_H - median, axis=1)
+        snaps[fid] = float(d.min())
+        if d.min() > max_snap or fid not in out["versions"]:
+            continue
+        corner = marks_H[int(np.argmin(d))]
+        for variant in VARIANTS:
+            along, across = [], []
+            for X_CH, points in out["versions"][fid]:
+                p = points[variant]
+                if p is None:
+                    continue
+                truth = X_CH[:3, :3] @ corner + X_CH[:3, 3]
+                ray = truth / np.linalg.norm(truth)
+                e = p - truth
+                along.append(float(e @ ray))
+                across.append(float(np.linalg.norm(e - (e @ ray) * ray)))
+            if along:
+                result[variant][fid] = (np.array(along), np.array(across))
+    return {"errors": result, "snaps": snaps}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", type=Path, default=ROOT / "diagrams" / "hand_eye.yaml")
     parser.add_argument("--duration", type=float, default=30.0)
+    parser.add_argument("--seed", type=int, help="as sustain-drake simulate --seed (default: the scenario's)")
     parser.add_argument("--refine", action="store_true",
                         help="map the refined points (hand_eye.refinement) instead of the tracker's")
     args = parser.parse_args()
-    refinement = load_scenario(args.scenario).hand_eye.refinement.params() if args.refine else None
-    out = run(args.scenario, args.duration, refinement)
+    scenario_refinement = load_scenario(args.scenario).hand_eye.refinement.params()
+    refinement = scenario_refinement if args.refine else None
+    out = run(args.scenario, args.duration, refinement, scenario_refinement, args.seed)
     R_WC, p_WC = out["X_WC"][:3, :3], out["X_WC"][:3, 3]
     print(f"{'id':>6} {'frames':>6} {'t0':>6} {'t1':>6}  p_H - tip (mm)            wander rms/90% (mm)"
           f"  truth-fit rms (mm)  spread (rad)  solver rms (mm)")
@@ -126,6 +221,32 @@ def main() -> None:
               f"{rotation_spread(c.statistic):6.3f}      {1e3 * c.solution.expected_rms:8.2f} {leader}")
     for a in out["bank"].adoptions:
         print(f"adoption t={a.time:.2f} feature {a.feature_id} kind {a.kind}")
+    truth = errors_against_true_marks(out)
+    far = {fid: d for fid, d in truth["snaps"].items() if d > 0.0045}
+    print(f"\nErrors against the true checker mark (mm; {len(truth['snaps']) - len(far)} of "
+          f"{len(truth['snaps'])} candidates within 4.5 mm of a corner or cell centre; the others, at "
+          f"{', '.join(f'{1e3 * d:.0f}' for d in sorted(far.values()))} mm, left out)")
+    print(f"{'id':>6} " + " ".join(f"{v + ' along mean/rms, across rms':>40}" for v in VARIANTS))
+    ids = sorted(set().union(*[set(truth["errors"][v]) for v in VARIANTS]))
+    for fid in ids:
+        cells = []
+        for v in VARIANTS:
+            if fid in truth["errors"][v]:
+                along, across = truth["errors"][v][fid]
+                rms = 1e3 * np.sqrt(np.mean(along**2))
+                cells.append(f"{len(along):5d} {1e3 * along.mean():7.2f} {rms:6.2f} "
+                             f"{1e3 * np.sqrt(np.mean(across**2)):6.2f}".rjust(40))
+            else:
+                cells.append("-".rjust(40))
+        print(f"{fid:6d} " + " ".join(cells))
+    for v in VARIANTS:
+        pooled = [truth["errors"][v][fid] for fid in ids if fid in truth["errors"][v]]
+        if pooled:
+            along = np.concatenate([p[0] for p in pooled])
+            across = np.concatenate([p[1] for p in pooled])
+            print(f"{v:>14}: {along.size} samples, along the ray mean {1e3 * along.mean():.2f} mm, "
+                  f"RMS {1e3 * np.sqrt(np.mean(along**2)):.2f} mm; across RMS "
+                  f"{1e3 * np.sqrt(np.mean(across**2)):.2f} mm")
 
 
 if __name__ == "__main__":

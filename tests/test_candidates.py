@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank, CandidateParams
-from sustain_drake.identification.eye_to_hand import default_criteria, pack_x
+from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, default_criteria, pack_x
 
 CRITERIA = default_criteria()
 PARAMS = CandidateParams(confirm_with_witness=False)  # one point suffices (the paper's rule)
@@ -332,10 +332,12 @@ def test_params_validation():
         CandidateParams(reacquire_radius=float("nan"))
 
 
-def test_joint_refinement_uses_ended_tracks_of_the_hand_and_not_another_link():
+@pytest.mark.parametrize("stitch_radius", [0.0, 0.005])
+def test_joint_refinement_uses_ended_tracks_of_the_hand_and_not_another_link(stitch_radius):
     """``joint``: at adoption the leader's camera is refined with the other points it explains,
-    including a hand point whose track ended (archived), never a point of another link."""
-    params = CandidateParams(confirm_with_witness=False, joint=True)
+    including a hand point whose track ended (archived), never a point of another link (with
+    stitching too: a point the camera does not explain is no member, so it is never stitched)."""
+    params = CandidateParams(confirm_with_witness=False, joint=True, stitch_radius=stitch_radius)
     criteria = replace(CRITERIA, min_samples=200)
     p4 = P_TOOL + [0.03, -0.02, 0.04]
 
@@ -460,3 +462,55 @@ def test_with_no_observed_point_the_candidates_tell_a_moved_camera():
     new = [k for k in range(301, 420) if moved[k][0] > moved[k - 1][0]]
     assert new and new[0] <= 300 + 35  # once the new candidates have 30 samples
     assert all(moved[k][1] > 1e-4 for k in new)  # each such frame is a violation
+
+
+def weak_track(feature_id, p_HP, orientation, wobble, rng, n=300):
+    """A candidate that tracked ``p_HP`` for ``n`` frames while the hand translated 0.3 m and
+    turned only ``wobble`` rad about ``orientation`` (a rotation vector): a mark seen on one face
+    of the tool over a few tenths of a radian, 1 mm of noise per axis."""
+    identifier = EyeToHandIdentifier()
+    for k in range(n):
+        t = k * DT
+        wobble_k = wobble * np.array([math.sin(1.1 * t), math.sin(0.7 * t + 1), math.sin(0.9 * t + 2)])
+        X = np.eye(4)
+        X[:3, :3] = (Rotation.from_rotvec(orientation) * Rotation.from_rotvec(wobble_k)).as_matrix()
+        X[:3, 3] = [0.4 + 0.15 * math.sin(0.5 * t), 0.15 * math.sin(0.8 * t), 0.3 + 0.1 * math.sin(1.1 * t)]
+        identifier.add(seen(X, p_HP, rng, noise=1e-3), X[:3, :3], X[:3, 3])
+    return candidates.Candidate(feature_id, identifier.state, identifier.solve(), 0.0, 0.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 3])
+def test_stitching_tracks_of_one_point_pins_the_camera_and_keeps_other_marks_apart(seed):
+    """``stitch_radius``: the leader saw its point over 0.06 rad of hand rotation (its camera is
+    millimetres off along the point/camera trade-off); two later tracks of the SAME point at hand
+    orientations 0.4 rad away, and a track of a mark 18 mm away (the checker's spacing). Stitched,
+    the same point's three statistics are one identifier over the union of their views: the camera
+    and the point come out several times nearer the truth than with one point per track."""
+    rng = np.random.default_rng(seed)
+    p_other = P_TOOL + [0.018, 0.0, 0.0]
+    leader = weak_track(1, P_TOOL, [0.0, 0.0, 0.0], 0.06, rng)
+    tracks = [weak_track(2, P_TOOL, [0.4, 0.0, 0.0], 0.02, rng),
+              weak_track(3, P_TOOL, [0.0, 0.4, 0.0], 0.02, rng),
+              weak_track(4, p_other, [0.4, 0.0, 0.0], 0.02, rng)]
+    errors = {}
+    for radius in (0.0, 0.005):
+        best, num_tracks = candidates._joint_refined(leader, tracks, [], CandidateParams(joint=True,
+                                                                                        stitch_radius=radius))
+        assert num_tracks == 4
+        est = best.solution.estimate
+        errors[radius] = (np.linalg.norm(est.p_WC - TRUTH.X_WC[:3, 3]), np.linalg.norm(est.p_HP - P_TOOL))
+    assert errors[0.0][0] > 1.5e-3 and errors[0.0][1] > 1.5e-3  # one point per track: the trade-off
+    assert errors[0.005][0] < min(0.8e-3, errors[0.0][0] / 2.5)
+    assert errors[0.005][1] < min(0.8e-3, errors[0.0][1] / 2.5)
+    # The groups: the leader's point with its two later tracks (the leader's first); the other mark
+    # alone, even with a radius wider than the marks' spacing (one point cannot explain both marks'
+    # samples: the merged statistic's error guards the merge).
+    statistics = [c.statistic for c in [leader] + tracks]
+    R_WC, p_WC = TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3]
+    for radius in (0.005, 0.05):
+        groups = candidates.stitch(statistics, R_WC, p_WC, radius)
+        assert [g for g, _ in groups] == [[0, 1, 2], [3]]
+    merged = groups[0][1]
+    assert merged[-1] == sum(s[-1] for s in statistics[:3])  # counts add: one identifier of the point
+    with pytest.raises(ValueError, match="stitch_radius"):
+        CandidateParams(stitch_radius=-1.0)

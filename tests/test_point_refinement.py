@@ -86,3 +86,94 @@ def test_feature_refiner_system_refines_only_features_of_the_shown_frame():
     refiner.GetInputPort("image_time").FixValue(context, [2.0 + 1 / 30])  # the next frame's image
     out = refiner.GetOutputPort("tracked_features").Eval(context)
     assert not out.valid.any() and not np.any(out.p_CP)
+
+
+def slanted_plane_depth(normal, c):
+    """The depth image of the plane ``normal . p_C = c`` (camera frame, m) and its exact depth at
+    any sub-pixel ``(u, v)``: ``z = c / (normal . r(u, v))`` for the pinhole ray ``r``."""
+    def z_at(u, v):
+        r = np.stack([(np.asarray(u) - K.cx) / K.fx, (np.asarray(v) - K.cy) / K.fy, np.ones_like(u)])
+        return c / np.tensordot(normal, r, axes=1)
+    v, u = np.mgrid[0:K.height, 0:K.width].astype(float)
+    return z_at(u, v).astype(np.float32), z_at
+
+
+def test_the_depth_of_a_slanted_face_is_read_at_the_sub_pixel_point():
+    points = np.array([[80.4, 60.3], [78.45, 52.2], [82.6, 66.7]])
+    # A face turned 30 deg about the camera's y axis, 0.75 m away: its depth changes by 3 mm per
+    # pixel across u.
+    normal = np.array([np.sin(np.radians(30)), 0.0, np.cos(np.radians(30))])
+    depth, z_at = slanted_plane_depth(normal, 0.75 * normal[2])
+    exact = z_at(points[:, 0], points[:, 1])
+    gradient = abs(z_at(81.0, 60.0) - z_at(80.0, 60.0))
+    assert gradient > 0.0025
+    plane = local_depth(depth, points, RefinementParams(depth_plane=True))
+    median = local_depth(depth, points, RefinementParams(depth_plane=False))
+    # The plane gives the depth on the sub-pixel ray (to float32 round-off of the image); the
+    # rounded window's median is off by the sub-pixel offset (0.4 px) times the gradient.
+    assert np.max(np.abs(plane - exact)) < 2e-5
+    assert np.min(np.abs(median - exact)) > 0.3 * gradient
+    # With the station's per-pixel noise (1.3 mm), over many draws: unbiased,
+    # and the noise of one pixel divided by about the window's side.
+    rng = np.random.default_rng(1)
+    errors = []
+    for _ in range(200):
+        noisy = depth + rng.normal(0.0, 1.3e-3, depth.shape).astype(np.float32)
+        errors.append(local_depth(noisy, points, RefinementParams(depth_plane=True)) - exact)
+    errors = np.array(errors)
+    assert np.all(np.abs(errors.mean(axis=0)) < 0.15e-3)  # unbiased
+    assert np.sqrt(np.mean(errors**2)) < 0.45e-3  # about 1.3 mm / sqrt(25 pixels)
+
+
+def test_the_plane_ignores_the_background_pixels_of_a_window():
+    # A fronto-parallel face at 0.8 m whose edge cuts the window: the background pixels (2.5 m)
+    # are left out of the fit (min_fraction allows up to 30 % of them).
+    depth = np.full((K.height, K.width), 0.8, np.float32)
+    depth[:, 72:] = 2.5  # 5 x 5 window at u = 70: 1 column of 5 on the background
+    z = local_depth(depth, np.array([[70.3, 50.2]]), RefinementParams(depth_plane=True))
+    assert z[0] == pytest.approx(0.8, abs=1e-6)
+    # Pixels on one line only (a degenerate window) give no depth, not a NaN passed on silently.
+    from sustain_drake.perception.point_refinement import plane_depth
+    use = np.zeros((1, 25), bool)
+    use[0, 10:15] = True  # one row of the window
+    du, dv = np.meshgrid(np.arange(-2, 3.0), np.arange(-2, 3.0))
+    assert np.isnan(plane_depth(np.full((1, 25), 0.8), use, du.reshape(1, -1), dv.reshape(1, -1))[0])[0]
+
+
+def cell_image(centre, half_size=(3.3, 4.5), scale=8):
+    """A yellow checker cell of the rod (6.6 x 9 px, as at 0.75 m) centred at a sub-pixel
+    ``centre``, with its two diagonal neighbours touching its corners (the rod's two-column
+    checker), drawn 8x larger and shrunk with area averaging."""
+    a, b = half_size
+    v, u = np.mgrid[0:K.height * scale, 0:K.width * scale]
+    uu, vv = (u + 0.5) / scale - 0.5, (v + 0.5) / scale - 0.5
+    lit = (np.abs(uu - centre[0]) < a) & (np.abs(vv - centre[1]) < b)
+    for dv in (-2 * b, 2 * b):
+        lit |= (np.abs(uu - centre[0] - 2 * a) < a) & (np.abs(vv - centre[1] - dv) < b)
+    big = np.where(lit, 220, 20).astype(np.uint8)
+    return cv2.resize(big, (K.width, K.height), interpolation=cv2.INTER_AREA)
+
+
+def test_a_feature_on_a_small_cell_is_moved_to_the_cell_centroid():
+    from sustain_drake.perception.optical_flow import to_gray
+    from sustain_drake.perception.point_refinement import blob_centres, refine_pixels
+    rng = np.random.default_rng(0)
+    blob, corner = [], []
+    for _ in range(30):
+        centre = np.array([70.0, 50.0]) + rng.uniform(0, 1, 2)
+        tracked = (centre + rng.uniform(-1, 1, 2))[None]
+        image = cell_image(centre)
+        p, ok = refine_pixels(image, tracked, RefinementParams(blob_window_px=6))
+        assert ok[0]
+        blob.append(p[0] - centre)
+        p, ok = refine_pixels(image, tracked, RefinementParams(blob_window_px=0))
+        corner.append(p[0] - centre)
+    # The centroid of the whole cell: a few hundredths of a pixel; cornerSubPix's 5 x 5 window
+    # sees part of the cell's edges only, and its point depends on where the window falls.
+    assert np.sqrt(np.mean(np.square(blob))) < 0.06
+    assert np.sqrt(np.mean(np.square(corner))) > 3 * np.sqrt(np.mean(np.square(blob)))
+    # A checker saddle is no blob (its bright region runs to the window's border): not moved by it.
+    centres, is_blob = blob_centres(to_gray(checker_image()), np.array([SADDLE]), 6)
+    assert not is_blob[0] and np.isnan(centres[0]).all()
+    # Too little contrast (a plain patch): no blob.
+    assert not blob_centres(np.full((K.height, K.width), 90, np.uint8), np.array([[70.0, 50.0]]), 6)[1][0]

@@ -11,11 +11,15 @@ identifier that assumes a point fixed on the hand (Eq. (30)) reads that drift as
   orthogonal to the offset: a checker saddle, an L corner, or the centre of a square smaller than
   the window). The track's drift only has to stay within the window; the refined point does not
   accumulate it;
-- the depth is the median of a small window around the refined pixel (the mark lies on a flat
-  face: the median of a plane sampled symmetrically about a point is the depth at the point, and
-  per-pixel depth noise drops by about the window's side), taken only when at least
-  ``min_fraction`` of the window is within ``surface_tolerance`` of that median (a window that
-  straddles a silhouette mixes the tool and the background: no point).
+- the depth comes from a small window of the depth image around the refined pixel, taken only
+  when at least ``min_fraction`` of the window is within ``surface_tolerance`` of the window's
+  median (a window that straddles a silhouette mixes the tool and the background: no point).
+  The mark lies on a flat face, so with ``depth_plane`` the face's plane is fitted to those
+  same-surface pixels and the refined pixel's own ray is intersected with it (``plane_depth``):
+  the window is centred on the ROUNDED pixel while the corner is sub-pixel, and on a face seen
+  obliquely the depth changes by several millimetres per pixel, so the window's median is off
+  by up to half a pixel's depth gradient. Without it the depth is the median (per-pixel noise
+  drops by about the window's side either way).
 
 The tracker (``optical_flow``) is untouched: its tracks keep their own pixels; a consumer that
 needs fixed points (the candidate identifiers) refines the features it uses.
@@ -40,6 +44,13 @@ class RefinementParams:
     depth_window_px: half side of the depth median window (px); 0 takes the one nearest pixel.
     surface_tolerance: m; window pixels within this of the median are on the same surface.
     min_fraction: of the window's pixels that must be on that surface.
+    depth_plane: the depth where the refined pixel's ray meets the plane fitted to the window's
+        same-surface pixels (``plane_depth``); False: the window's median.
+    blob_window_px: > 0: a feature on a bright mark smaller than the window (a yellow checker
+        cell of the rod is 6-7 x 7-9 px at 0.7-0.8 m: the tracker's Shi-Tomasi block of 7 px
+        finds its centre, not its corners) is moved to the mark's intensity centroid
+        (``blob_centres``, half side of the window in px) when the mark lies wholly inside the
+        window; otherwise (a corner, an edge) ``cornerSubPix``'s pixel is kept. 0: off.
     """
 
     corner_window_px: int = 2
@@ -47,9 +58,11 @@ class RefinementParams:
     depth_window_px: int = 2
     surface_tolerance: float = 0.008
     min_fraction: float = 0.7
+    depth_plane: bool = False
+    blob_window_px: int = 0
 
     def __post_init__(self):
-        if self.corner_window_px < 0 or self.depth_window_px < 0:
+        if self.corner_window_px < 0 or self.depth_window_px < 0 or self.blob_window_px < 0:
             raise ValueError(f"window sizes must be >= 0 ({self})")
         if not (self.max_shift_px > 0 and self.surface_tolerance > 0 and 0 < self.min_fraction <= 1):
             raise ValueError(f"max_shift_px, surface_tolerance and min_fraction must be positive ({self})")
@@ -73,14 +86,69 @@ def refine_pixels(gray: np.ndarray, p_px: np.ndarray, params: RefinementParams):
         corners = p[ok].reshape(-1, 1, 2).copy()
         cv2.cornerSubPix(gray, corners, (w, w), (-1, -1), _CRITERIA)
         refined[ok] = corners.reshape(-1, 2)
+    refined = refined.astype(float)
+    if params.blob_window_px > 0 and ok.any():
+        centres, is_blob = blob_centres(gray, p, params.blob_window_px)
+        refined = np.where(is_blob[:, None], centres, refined)
     ok &= np.isfinite(refined).all(axis=1)
     ok &= np.linalg.norm(refined - p, axis=1) <= params.max_shift_px
-    return refined.astype(float), ok
+    return refined, ok
+
+
+def blob_centres(gray: np.ndarray, p_px: np.ndarray, half: int, min_contrast: float = 40.0):
+    """Intensity centroids of bright marks (``(centres (K x 2), is_blob (K,))``, px): in the
+    ``(2 half + 1)^2`` window around each rounded pixel, the bright pixels (above the middle of the
+    window's 10-90 % intensity range, at least ``min_contrast`` grey levels wide) connected to the
+    pixel (4-connectivity), grown by one pixel for their anti-aliased edge, weighted by their
+    brightness between the dark and bright levels. Only a region that does not touch the window's
+    border (the whole mark is seen) and has at least 4 pixels is a blob.
+
+    The centroid of the whole region uses every edge pixel's partial coverage, so it is stable to
+    a few hundredths of a pixel from frame to frame; a corner window sees a part of the mark's
+    edges only, which part depending on where the window falls and how the face is foreshortened
+    (1-2 mm of wander on the rod). Under perspective the centroid of the projected mark differs
+    from the projection of its centre by a fraction of the mark's size times its size over the
+    depth (18 mm x 18 mm / 0.75 m: about 0.4 mm at most, nearly constant over a track)."""
+    g = np.asarray(gray, dtype=np.float32)
+    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
+    centres, is_blob = np.full(p.shape, np.nan), np.zeros(p.shape[0], bool)
+    h, w = g.shape
+    kernel = np.ones((3, 3), np.uint8)
+    for k, (u, v) in enumerate(p):
+        if not np.isfinite(u + v):
+            continue
+        u0, v0 = int(round(u)), int(round(v))
+        if not (half <= u0 < w - half and half <= v0 < h - half):
+            continue
+        window = g[v0 - half:v0 + half + 1, u0 - half:u0 + half + 1]
+        lo, hi = np.percentile(window, (10, 90))
+        if hi - lo < min_contrast:
+            continue
+        bright = (window > 0.5 * (lo + hi)).astype(np.uint8)
+        _, labels = cv2.connectedComponents(bright, connectivity=4)
+        label = labels[half, half]
+        if label == 0:
+            continue
+        region = labels == label
+        touches_border = region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any()
+        if region.sum() < 4 or touches_border:
+            continue
+        # Its anti-aliased edge, but not another mark's pixels (a checker's diagonal neighbours).
+        grown = cv2.dilate(region.astype(np.uint8), kernel).astype(bool) & ((labels == 0) | region)
+        weight = np.clip((window - lo) / (hi - lo), 0.0, 1.0) * grown
+        total = weight.sum()
+        rows, cols = np.mgrid[-half:half + 1, -half:half + 1]
+        centres[k] = (u0 + (weight * cols).sum() / total, v0 + (weight * rows).sum() / total)
+        is_blob[k] = True
+    return centres, is_blob
 
 
 def local_depth(depth: np.ndarray, p_px: np.ndarray, params: RefinementParams) -> np.ndarray:
-    """Robust depth at each pixel (m): the median of a ``(2 k + 1)^2`` window, NaN when fewer than
-    ``min_fraction`` of its pixels are valid and within ``surface_tolerance`` of that median."""
+    """Robust depth at each (sub-pixel) pixel (m), from the ``(2 k + 1)^2`` window around the
+    rounded pixel: NaN when fewer than ``min_fraction`` of its pixels are valid and within
+    ``surface_tolerance`` of the window's median; else the median, or with ``depth_plane`` the
+    depth where the pixel's own ray meets the plane fitted to those same-surface pixels
+    (``plane_depth``)."""
     d = np.asarray(depth, dtype=float)
     if d.ndim == 3:
         d = d[:, :, 0]
@@ -103,9 +171,44 @@ def local_depth(depth: np.ndarray, p_px: np.ndarray, params: RefinementParams) -
         median = np.nanmedian(window, axis=1) if window.size else np.zeros(0)
         same = np.abs(window - median[:, None]) <= params.surface_tolerance
     good = np.isfinite(median) & (same.mean(axis=1) >= params.min_fraction)
-    values = np.where(good, median, np.nan)
-    out[inside] = values
+    values = median
+    if params.depth_plane and k > 0 and good.any():
+        du, dv = np.meshgrid(offsets, offsets)  # window order: rows are v, columns u
+        # Offsets from the sub-pixel point itself, so that the fit's intercept is its depth.
+        du = du.ravel()[None, :] - (p[inside, 0] - u[inside])[:, None]
+        dv = dv.ravel()[None, :] - (p[inside, 1] - v[inside])[:, None]
+        values = plane_depth(window, same & good[:, None], du, dv)[0]
+    out[inside] = np.where(good, values, np.nan)
     return out
+
+
+def plane_depth(z: np.ndarray, use: np.ndarray, du: np.ndarray, dv: np.ndarray):
+    """Depth (m) at pixel offset (0, 0) of the plane through the 3-D points of a depth window,
+    and the plane's depth at every pixel of the window: ``(K,), (K x n)`` for ``K`` windows of
+    ``n`` pixels (``z``), the pixels to fit (``use``) and their offsets ``du, dv`` (px).
+
+    A plane ``n . p_C = c`` in the camera frame and the pinhole ray ``p_C = z r(u, v)``, with
+    ``r = ((u - c_x) / f_x, (v - c_y) / f_y, 1)`` affine in the pixel, give ``1 / z = n . r / c``:
+    the inverse depth of a plane is exactly affine in the pixel offsets, whatever the intrinsics.
+    So a linear least-squares fit of ``1 / z = a + b du + c dv`` over the pixels ``use`` is the
+    plane fitted with its errors along the rays (the depth camera's, with the same relative weight
+    over a small window), and ``1 / a`` is where the ray at offset (0, 0) meets it. NaN for a
+    window whose pixels do not define a plane (fewer than three, or all on one line)."""
+    use = use & np.isfinite(z) & (z > 0)
+    w = use.astype(float)
+    inv = np.where(use, 1.0 / np.where(use, z, 1.0), 0.0)
+    A = np.stack([np.ones_like(du), du, dv], axis=2)  # K x n x 3
+    H = np.einsum("kni,kn,knj->kij", A, w, A)
+    g = np.einsum("kni,kn,kn->ki", A, w, inv)
+    coef = np.full((z.shape[0], 3), np.nan)
+    ok = np.linalg.cond(H) < 1e8 if H.size else np.zeros(0, bool)
+    if ok.any():
+        coef[ok] = np.linalg.solve(H[ok], g[ok][:, :, None])[:, :, 0]
+    inv_plane = np.einsum("kni,ki->kn", A, coef)
+    with np.errstate(all="ignore"):
+        plane = np.where(inv_plane > 0, 1.0 / inv_plane, np.nan)
+        at_point = np.where(coef[:, 0] > 0, 1.0 / coef[:, 0], np.nan)
+    return at_point, plane
 
 
 def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
