@@ -105,11 +105,12 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         builder.Connect(features, refiner.GetInputPort("tracked_features"))
         features = refiner.GetOutputPort("tracked_features")
     builder.Connect(features, candidates.GetInputPort("tracked_features"))
-    builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
     connect_identify_observe(builder, candidates, machine)
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     camera = None
-    if hand_eye.camera_motion.enabled:  # the camera notices its own motion from the static scene
+    if not hand_eye.camera_motion.enabled:
+        builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
+    else:  # the camera notices its own motion from the static scene
         camera = builder.AddSystem(CameraMotionDetector(
             num_joints, tracker.grid.num_cells, (info.width(), info.height()),
             hand_eye.camera_motion.params(), period=period, offset=0.75 * period))  # fmt: skip
@@ -118,6 +119,8 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         for name in ("feature_on_body", "body_feature_cells"):
             builder.Connect(detector.GetOutputPort(name), camera.GetInputPort(name))
         builder.Connect(camera.GetOutputPort("camera_motion"), machine.GetInputPort("camera_motion"))
+        # The identifiers' candidates without the static scene's features (stale body cells).
+        builder.Connect(camera.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
     return HandEyeLoop(tracker, detector, candidates, machine, refiner, camera)
 
 

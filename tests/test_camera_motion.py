@@ -220,3 +220,20 @@ def test_the_system_declares_one_move_and_its_context_clones():
     # The cloned context kept its own state (nothing in Python attributes).
     clone = detector.GetMyContextFromRoot(saved)
     assert list(detector.GetOutputPort("camera_motion").Eval(clone)) == [0.0, 0.0]
+
+
+def test_features_still_while_the_arm_moves_are_static_scene_not_hand_candidates():
+    scene = Scene(seed=8, background=25, person=0, robot=10)
+    scene.groups["robot"][1] = False  # in no body cell, as after a camera move
+    static_ids, hand_ids = scene.ids["background"], scene.ids["robot"]
+    # The arm rests 1 s: nothing is known to be static yet (a resting hand is still too).
+    state, _ = run(scene, 30, lambda k: {})
+    assert not camera_motion.static_features(state, np.concatenate([static_ids, hand_ids]), PARAMS).any()
+    # The joints start to move; the image lags (the hand's features still for 2 frames): no
+    # feature is static scene yet, the arm has not moved long enough.
+    state, _ = run(scene, 2, lambda k: {}, lambda k: True, state, start=30)
+    assert not camera_motion.static_features(state, hand_ids, PARAMS).any()
+    # The arm moves the hand's features for 1 s: the still ones are the static scene.
+    state, _ = run(scene, 30, lambda k: {"robot": shift([1.0, 0.5])}, lambda k: True, state, start=32)
+    assert camera_motion.static_features(state, static_ids, PARAMS).all()
+    assert not camera_motion.static_features(state, hand_ids, PARAMS).any()

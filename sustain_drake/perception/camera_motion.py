@@ -71,6 +71,7 @@ class CameraMotionParams:
     rest_frames: int = 3              # consecutive frames not moving that end an episode
     min_frames: int = 2               # moving frames of an episode before it can be a camera move
     move_px: float = 3.0              # composed displacement of an episode that is a camera move
+    exclude_static: bool = True       # static scene features are no body candidates (``static_features``)
 
     def __post_init__(self):
         times = (self.anchor_time, self.arm_speed, self.feature_still_px)
@@ -108,8 +109,9 @@ class CameraMotionState:
     the last moving one; ``ids`` and ``still_since``: the features tracked in the last frame (sorted
     ids) and since when each has been still against the scene (s); ``last_time``: that frame's time
     (a frame not newer is ignored); ``last``: that frame's verdict; ``arm_moving``,
-    ``arm_still_since``: whether a joint moved at the last frame, and since when the arm has been
-    at rest (s)."""
+    ``arm_clock``, ``arm_still_since``: whether a joint moved at the last frame, for how long the
+    arm has moved in all (s, between frames where it moved) and since when it has been at rest (s);
+    ``still_clock``: per feature, ``arm_clock`` when it became still."""
 
     moving: bool = False
     moves: int = 0
@@ -122,7 +124,9 @@ class CameraMotionState:
     still_since: np.ndarray = field(default_factory=lambda: np.zeros(0))
     last_time: float = -math.inf
     last: FrameMotion | None = None
+    still_clock: np.ndarray = field(default_factory=lambda: np.zeros(0))
     arm_moving: bool = False
+    arm_clock: float = 0.0
     arm_still_since: float = -math.inf
 
     def output(self) -> np.ndarray:
@@ -146,12 +150,28 @@ def displacement(M: np.ndarray, points: np.ndarray) -> float:
 def still_since(state: CameraMotionState, ids: np.ndarray) -> np.ndarray:
     """Per feature in ``ids``: since when it has been still against the scene (s), from the last
     frame's memory; NaN for a feature not tracked in the last frame (no flow yet)."""
+    return _remembered(state, ids, state.still_since)
+
+
+def _remembered(state: CameraMotionState, ids: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The last frame's per-feature ``values`` (aligned with ``state.ids``) for ``ids``; NaN for
+    a feature not tracked in the last frame."""
     out = np.full(ids.shape[0], np.nan)
     if state.ids.size:
         pos = np.minimum(np.searchsorted(state.ids, ids), state.ids.size - 1)
         known = state.ids[pos] == ids
-        out[known] = state.still_since[pos[known]]
+        out[known] = values[pos[known]]
     return out
+
+
+def static_features(state: CameraMotionState, ids: np.ndarray, params: CameraMotionParams) -> np.ndarray:
+    """Per feature in ``ids`` (the last frame's): it stayed still against the scene for
+    ``anchor_time`` s of arm motion (``arm_clock``) and more. Every joint moves the hand (the last link), so
+    such a feature is not on the hand, whatever cell it lies in: it is no candidate for the
+    hand-eye identifiers (after a camera move the body cells, fixed in the image, lie on the
+    static scene)."""
+    clock = _remembered(state, np.asarray(ids, np.int64).ravel(), state.still_clock)
+    return ~np.isnan(clock) & (state.arm_clock - np.nan_to_num(clock, nan=np.inf) >= params.anchor_time)
 
 
 def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionParams,
@@ -213,10 +233,14 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
     M = frame.M if frame.moving else np.hstack([np.eye(2), np.zeros((2, 1))])
     residual = np.linalg.norm(p_px - (p_prev @ M[:, :2].T + M[:, 2]), axis=1)
     moved = residual > (params.inlier_px if frame.moving else params.feature_still_px)
-    since = np.where(np.isnan(since) | ~finite | moved, time, since)
+    restart = np.isnan(since) | ~finite | moved
+    arm_clock = state.arm_clock + (time - state.last_time if arm_moving and state.arm_moving else 0.0)
+    since = np.where(restart, time, since)
+    clock = np.where(restart, arm_clock, _remembered(state, ids, state.still_clock))
     order = np.argsort(ids)
-    new = replace(state, ids=ids[order], still_since=since[order], last_time=float(time), last=frame,
-                  arm_moving=arm_moving, arm_still_since=arm_still_since)
+    new = replace(state, ids=ids[order], still_since=since[order], still_clock=clock[order],
+                  last_time=float(time), last=frame, arm_moving=arm_moving, arm_clock=arm_clock,
+                  arm_still_since=arm_still_since)
     if frame.moving:
         M = np.vstack([frame.M, [0.0, 0.0, 1.0]])
         if not state.moving:  # onset: a new episode

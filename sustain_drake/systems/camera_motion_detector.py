@@ -39,6 +39,7 @@ class CameraMotionDetector(LeafSystem):
         output_ports:
         - camera_motion
         - accumulated_displacement
+        - feature_on_body
 
     Inputs: ``tracked_features`` (``TrackedFeatures`` of the ``OpticalFlowTracker``: the tracks'
     own pixels and flows), ``feature_on_body`` (``FeatureBodyFlags`` of the
@@ -50,7 +51,10 @@ class CameraMotionDetector(LeafSystem):
     Outputs: ``camera_motion`` (2, ``[moving, moves]``: 1 while a scene-motion episode lasts, and
     the number of camera moves declared so far; connect to ``CoordinationStateMachine``'s
     ``camera_motion``), ``accumulated_displacement`` (1, px: the current or last episode's
-    composed image displacement).
+    composed image displacement), ``feature_on_body`` (the input's ``FeatureBodyFlags`` with
+    ``on_body`` and ``in_body_cell`` cleared for the static scene's features,
+    ``camera_motion.static_features``, when ``params.exclude_static``: connect to the
+    ``CandidateIdentifiers``' ``feature_on_body``; unconnected flags: none on the body).
 
     Every ``period`` s (offset ``offset``: after the coincidence detector's update of the same
     frame) a periodic unrestricted update runs one step on a new frame (a frame time not newer
@@ -79,6 +83,9 @@ class CameraMotionDetector(LeafSystem):
             self.motion_state(c).output()[:2]), prerequisites_of_calc=state)  # fmt: skip
         self.DeclareVectorOutputPort("accumulated_displacement", 1, lambda c, o: o.SetAtIndex(
             0, self.motion_state(c).accumulated_px), prerequisites_of_calc=state)  # fmt: skip
+        self.DeclareAbstractOutputPort(
+            "feature_on_body", lambda: AbstractValue.Make(FeatureBodyFlags()), self._calc_flags,
+            prerequisites_of_calc={self.all_state_ticket(), self._flags.ticket()})  # fmt: skip
 
     @property
     def params(self) -> CameraMotionParams:
@@ -101,6 +108,18 @@ class CameraMotionDetector(LeafSystem):
             new = replace(new, motion=camera_motion.step(
                 old.motion, f.time, f.ids, f.p_px, f.flow_px, robot, joints_moving, self._params, self._size))
         state.get_mutable_abstract_state(self._state).set_value(new)
+
+    def _calc_flags(self, context, output) -> None:
+        if not self._flags.HasValue(context):
+            output.set_value(FeatureBodyFlags())
+            return
+        flags = self._flags.Eval(context)
+        if not self._params.exclude_static:
+            output.set_value(flags)
+            return
+        static = camera_motion.static_features(self.motion_state(context), flags.ids, self._params)
+        output.set_value(replace(flags, on_body=np.asarray(flags.on_body, bool) & ~static,
+                                 in_body_cell=np.asarray(flags.in_body_cell, bool) & ~static))
 
     def _robot(self, context, f: TrackedFeatures) -> np.ndarray:
         """Per feature: a body feature, in a body cell or in a cell holding a body feature."""
