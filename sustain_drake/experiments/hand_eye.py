@@ -6,7 +6,8 @@ The loop, from images only (no ground truth inside it)::
         tracked_features + feature_on_body + X_WH -> CandidateIdentifiers -> CoordinationStateMachine
         state machine: adopted_x -> reference_x, reset -> reset, pause -> motion_pause
         (camera_motion.enabled) tracked_features + feature_on_body + joints -> CameraMotionDetector
-            -> state machine camera_motion (a camera move is a change detection)
+            -> state machine camera_motion (a camera move is a change detection), and its
+            feature_on_body (the static scene's features cleared) -> CandidateIdentifiers
 
 ``finish`` evaluates against the station's ground truth (``true_X_WC``, ``true_p_HP``, logged
 beside the loop): the time of each convergence and each detection, the error of each adopted

@@ -34,6 +34,12 @@ goes up, once per episode) as soon as it has ``min_frames`` moving frames (one f
 tracking glitch, a camera moves over frames) and the composed motion's displacement reaches
 ``move_px``.
 
+**Static scene is no hand candidate** (``static_features``, ``exclude_static``). A feature that
+stayed still against the scene through ``anchor_time`` s of arm motion is not on the hand (every
+joint moves the hand, the last link), whatever cell it lies in. The hand-eye candidates skip such
+features: with a textured wall, static corners in body cells would take candidate slots, and
+after a camera move the body cells (fixed in the image) lie on the static scene.
+
 Displacement of an image motion ``M``: the mean of ``||M p - p||`` over a 3 x 3 grid of image
 points (corners, edge midpoints, centre): a pan or tilt's image translation, a roll's mean arc.
 
