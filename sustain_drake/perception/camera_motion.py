@@ -7,8 +7,9 @@ scene in the image coherently (one global image motion), whereas the robot moves
 body's features and a walking person a minority of them. So, per frame:
 
 - the *background*: the *anchors*, tracked features that have not moved against the scene for at
-  least ``anchor_time`` s (their flow off the frame's global motion by at most ``feature_still_px``,
-  or ``inlier_px`` while the scene moves: a static corner stays an anchor while the camera turns)
+  least ``anchor_time`` s (within ``feature_still_px`` of where they became still, so that a
+  slow drift adds up; while the scene moves, their flow within ``inlier_px`` of the frame's global
+  motion: a static corner stays an anchor while the camera turns)
   and are not the robot's (neither a body feature nor in a body cell: ``robot`` below), unless the
   arm has been at rest for ``anchor_time`` (a body at rest is static scene). A walking person's
   features keep moving and never become anchors; a feature seeded in this frame has no flow yet;
@@ -72,7 +73,7 @@ class CameraMotionParams:
     inlier_px: float = 1.0            # RANSAC: a feature within this of the fitted motion is an inlier
     min_inlier_fraction: float = 0.6  # of the background: the consensus that is "the scene"
     still_px: float = 0.5             # per-frame displacement at or below this: not moving
-    feature_still_px: float = 0.2     # a feature's flow off the scene's motion above this: it moved
+    feature_still_px: float = 0.5     # a feature this far (px) from where it became still: it moved
     arm_speed: float = 0.01           # rad/s: a joint faster than this moves the arm (Eq. (27)'s threshold)
     rest_frames: int = 3              # consecutive frames not moving that end an episode
     min_frames: int = 2               # moving frames of an episode before it can be a camera move
@@ -117,7 +118,8 @@ class CameraMotionState:
     (a frame not newer is ignored); ``last``: that frame's verdict; ``arm_moving``,
     ``arm_clock``, ``arm_still_since``: whether a joint moved at the last frame, for how long the
     arm has moved in all (s, between frames where it moved) and since when it has been at rest (s);
-    ``still_clock``: per feature, ``arm_clock`` when it became still."""
+    ``still_clock``, ``still_px``: per feature, ``arm_clock`` when it became still and its pixel
+    then (moved along with the scene's motion since)."""
 
     moving: bool = False
     moves: int = 0
@@ -131,6 +133,7 @@ class CameraMotionState:
     last_time: float = -math.inf
     last: FrameMotion | None = None
     still_clock: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    still_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     arm_moving: bool = False
     arm_clock: float = 0.0
     arm_still_since: float = -math.inf
@@ -162,7 +165,7 @@ def still_since(state: CameraMotionState, ids: np.ndarray) -> np.ndarray:
 def _remembered(state: CameraMotionState, ids: np.ndarray, values: np.ndarray) -> np.ndarray:
     """The last frame's per-feature ``values`` (aligned with ``state.ids``) for ``ids``; NaN for
     a feature not tracked in the last frame."""
-    out = np.full(ids.shape[0], np.nan)
+    out = np.full((ids.shape[0],) + np.shape(values)[1:], np.nan)
     if state.ids.size:
         pos = np.minimum(np.searchsorted(state.ids, ids), state.ids.size - 1)
         known = state.ids[pos] == ids
@@ -234,17 +237,23 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
     still_long = time - np.where(tracked, since, time) >= params.anchor_time
     anchors = finite & tracked & still_long & (arm_at_rest | ~robot)
     frame = frame_motion(p_prev[anchors], p_px[anchors], params, points)
-    # Memory: a feature moving against the scene (its flow off the frame's motion, the identity
-    # unless the scene moves) restarts its still time; so does a feature seeded now.
-    M = frame.M if frame.moving else np.hstack([np.eye(2), np.zeros((2, 1))])
-    residual = np.linalg.norm(p_px - (p_prev @ M[:, :2].T + M[:, 2]), axis=1)
-    moved = residual > (params.inlier_px if frame.moving else params.feature_still_px)
+    # Memory: a feature moving against the scene restarts its still time; so does a feature seeded
+    # now. While the scene moves: its flow off the frame's motion (and its still pixel follows);
+    # else: its distance from where it became still (a slow drift adds up over frames).
+    if frame.moving:
+        moved = np.linalg.norm(p_px - (p_prev @ frame.M[:, :2].T + frame.M[:, 2]), axis=1) > params.inlier_px
+        anchor_px = p_px
+    else:
+        anchor_px = _remembered(state, ids, state.still_px)
+        moved = ~(np.linalg.norm(p_px - anchor_px, axis=1) <= params.feature_still_px)
     restart = np.isnan(since) | ~finite | moved
+    anchor_px = np.where(restart[:, None], p_px, anchor_px)
     arm_clock = state.arm_clock + (time - state.last_time if arm_moving and state.arm_moving else 0.0)
     since = np.where(restart, time, since)
     clock = np.where(restart, arm_clock, _remembered(state, ids, state.still_clock))
     order = np.argsort(ids)
     new = replace(state, ids=ids[order], still_since=since[order], still_clock=clock[order],
+                  still_px=anchor_px[order],
                   last_time=float(time), last=frame, arm_moving=arm_moving, arm_clock=arm_clock,
                   arm_still_since=arm_still_since)
     if frame.moving:
