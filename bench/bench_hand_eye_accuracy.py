@@ -3,7 +3,9 @@
 Runs ``sustain-drake simulate SCENARIO --duration D --seed N --no-replay`` for each seed (``--jobs``
 at a time: one simulation holds one core) and prints, per seed, the first adoption's time, its
 camera position error (and the part along the optical axis), rotation error and tool point error
-(``metrics.json`` ``hand_eye.adopted[0]``), with the mean and worst over the seeds.
+(``metrics.json`` ``hand_eye.adopted[0]``), with the mean and worst over the seeds; then the camera
+of the model in use at the end of the run (``model_in_use_at_end``: with ``adopt_refinements``
+the adopted model refined while observing) and the false alarms.
 
     .venv/bin/python bench/bench_hand_eye_accuracy.py [--seeds 3 1 2 4] [--duration 25] [--jobs 2]
 """
@@ -23,7 +25,7 @@ KEYS = ("time_s", "camera_position_error_mm", "camera_position_error_along_axis_
 
 
 def run_seed(scenario: Path, duration: float, out: Path, seed: int) -> dict | None:
-    """The first adoption of one run (None if nothing was adopted or the run failed)."""
+    """The ``hand_eye`` metrics of one run (None if the run failed)."""
     folder = out / f"seed{seed}"
     command = [str(ROOT / ".venv" / "bin" / "sustain-drake"), "simulate", str(scenario), "--duration",
                str(duration), "--seed", str(seed), "--out", str(folder), "--no-replay"]
@@ -31,8 +33,7 @@ def run_seed(scenario: Path, duration: float, out: Path, seed: int) -> dict | No
     if done.returncode != 0:
         print(f"seed {seed}: simulate failed: {done.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
         return None
-    adopted = json.loads((folder / "metrics.json").read_text())["hand_eye"]["adopted"]
-    return adopted[0] if adopted else None
+    return json.loads((folder / "metrics.json").read_text())["hand_eye"]
 
 
 def main() -> None:
@@ -47,8 +48,11 @@ def main() -> None:
         results = list(pool.map(lambda s: run_seed(args.scenario, args.duration, args.out, s), args.seeds))
     print(f"{'seed':>4} {'adopted (s)':>11} {'camera (mm)':>11} {'along axis':>10} {'rot (deg)':>9} "
           f"{'tool pt (mm)':>12}")
-    rows = []
-    for seed, a in zip(args.seeds, results, strict=True):
+    rows, ends = [], []
+    for seed, metrics in zip(args.seeds, results, strict=True):
+        a = metrics["adopted"][0] if metrics and metrics["adopted"] else None
+        if metrics:
+            ends.append((seed, metrics["model_in_use_at_end"], metrics["num_false_alarms"]))
         if a is None:
             print(f"{seed:4d} {'none':>11}")
             continue
@@ -61,6 +65,13 @@ def main() -> None:
             values = [pick([r[i] for r in rows]) for i in range(len(KEYS))]
             print(f"{name:>4} {'':>11} {values[1]:11.2f} {values[2]:10.2f} {values[3]:9.2f} "
                   f"{values[4]:12.2f}")
+    print(f"\n{'seed':>4} {'model in use at the end: camera (mm)':>37} {'rot (deg)':>9} {'false alarms':>12}")
+    for seed, end, alarms in ends:
+        if end is None:
+            print(f"{seed:4d} {'none':>37} {'':>9} {alarms:12d}")
+        else:
+            mm, deg = end["camera_position_error_mm"], end["camera_rotation_error_deg"]
+            print(f"{seed:4d} {mm:37.2f} {deg:9.2f} {alarms:12d}")
 
 
 if __name__ == "__main__":

@@ -44,7 +44,13 @@ from sustain_drake.identification.candidates import (
     rotation_spread,
 )
 from sustain_drake.identification.eye_to_hand import pack_x
-from sustain_drake.perception.point_refinement import RefinementParams, refine_points
+from sustain_drake.perception.optical_flow import to_gray
+from sustain_drake.perception.point_refinement import (
+    RefinementParams,
+    local_depth,
+    refine_pixels,
+    refine_points,
+)
 from sustain_drake.station import build_station, camera_info, load_scenario
 from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
 
@@ -52,10 +58,11 @@ ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = ("tracker", "median depth", "plane depth")
 
 
-def rod_marks_T() -> np.ndarray:
+def rod_marks_T() -> tuple[np.ndarray, np.ndarray]:
     """Every point of the rod's side faces that an image feature can be fixed on, in the tool frame T
-    (M x 3, m): the checker's corners (across at the column edges: margin, margin + cell and
-    margin + 2 cells from one edge; along at every row boundary) and its cells' centres (a yellow
+    (M x 3, m), and their faces' outward normals (M x 3): the checker's corners (across at the
+    column edges: margin, margin + cell and margin + 2 cells from one edge; along at every row
+    boundary) and its cells' centres (a yellow
     cell is 6-7 x 7-9 px at 0.7-0.8 m: a blob whose centre ``cornerSubPix`` finds). The rod spans z
     in [-0.05, 0.25] (centre at z = 0.1)."""
     spec = importlib.util.spec_from_file_location("generate_assets", ROOT / "models" / "generate_assets.py")
@@ -68,11 +75,12 @@ def rod_marks_T() -> np.ndarray:
                for z in z0 + assets.ROD_ROW * np.arange(1, rows)]
     centres = [(a, z) for a in -half + assets.ROD_MARGIN + assets.ROD_CELL * (np.arange(2) + 0.5)
                for z in z0 + assets.ROD_ROW * (np.arange(rows) + 0.5)]
-    out = []
+    out, normals = [], []
     for sign in (-1.0, 1.0):
         for a, z in corners + centres:
             out += [(sign * half, a, z), (a, sign * half, z)]
-    return np.array(out)
+            normals += [(sign, 0.0, 0.0), (0.0, sign, 0.0)]
+    return np.array(out), np.array(normals)
 
 
 def run(scenario_path: Path, duration: float, refinement: RefinementParams | None = None,
@@ -93,6 +101,7 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
     period = 1.0 / scenario.camera.fps
     tracks: dict[int, list] = {}
     versions: dict[int, list] = {}
+    reasons: dict[int, list] = {}
     compare = compare or RefinementParams()
     by_depth = {"median depth": dataclasses.replace(compare, depth_plane=False),
                 "plane depth": dataclasses.replace(compare, depth_plane=True)}
@@ -130,10 +139,16 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
                 refined, refined_ok = refine_points(color, depth, features.p_px, info, refinement)
             both = {name: refine_points(color, depth, features.p_px, info, params)
                     for name, params in by_depth.items()}
+            # Why a refined point is not valid: no corner near the tracked pixel (or the window
+            # leaves the image), else no clean depth there (a silhouette, a grazing face).
+            pixels, pixel_ok = refine_pixels(to_gray(color), features.p_px, compare)
+            depth_ok = np.isfinite(local_depth(depth, pixels, compare))
         X_CH = np.linalg.inv(X_WC) @ X_WH
         for fid in {c.feature_id for c in bank.candidates}:
             k = row.get(fid)
             if k is not None and both:
+                reasons.setdefault(fid, []).append((features.time, bool(pixel_ok[k]),
+                                                    bool(pixel_ok[k] and depth_ok[k])))
                 points = {"tracker": features.p_CP[k].copy() if features.valid[k] else None}
                 points.update({name: p[k].copy() if ok[k] else None for name, (p, ok) in both.items()})
                 versions.setdefault(fid, []).append((X_CH, points))
@@ -154,6 +169,7 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
     X_WT = plant.EvalBodyPoseInWorld(pc, plant.GetBodyByName("tool")).GetAsMatrix4()
     X_WH_now = station.GetOutputPort("X_WH").Eval(sc).GetAsMatrix4()
     return {"tracks": tracks, "candidates": seen_candidates, "X_WC": X_WC, "versions": versions,
+            "reasons": reasons, "compare": compare,
             "X_HT": np.linalg.inv(X_WH_now) @ X_WT,
             "bank": handle.candidates.bank(handle.candidates.GetMyContextFromRoot(root))}
 
@@ -162,9 +178,11 @@ def errors_against_true_marks(out: dict, max_snap: float = 0.0045) -> dict:
     """Per candidate whose true-camera ``p_H`` (median over its frames) lies within ``max_snap`` (half
     the 9 mm between a cell's centre and its edge) of a checker mark (``rod_marks_T``), and per
     variant: every sample's error against that mark, split along the camera ray and across it:
-    ``{"errors": {variant: {id: (along (n,), across (n,))}}, "snaps": {id: distance}}``."""
-    marks = rod_marks_T()
+    ``{"errors": {variant: {id: (along (n,), across (n,), incidence (n,))}}, "snaps": {id: distance}}``
+    (incidence: the angle between the camera ray and the mark's face normal, rad)."""
+    marks, normals = rod_marks_T()
     marks_H = (out["X_HT"] @ np.c_[marks, np.ones(len(marks))].T).T[:, :3]
+    normals_H = normals @ out["X_HT"][:3, :3].T
     result = {v: {} for v in VARIANTS}
     snaps = {}
     for fid, rows in out["tracks"].items():
@@ -173,9 +191,9 @@ def errors_against_true_marks(out: dict, max_snap: float = 0.0045) -> dict:
         snaps[fid] = float(d.min())
         if d.min() > max_snap or fid not in out["versions"]:
             continue
-        corner = marks_H[int(np.argmin(d))]
+        corner, normal = marks_H[int(np.argmin(d))], normals_H[int(np.argmin(d))]
         for variant in VARIANTS:
-            along, across = [], []
+            along, across, incidence = [], [], []
             for X_CH, points in out["versions"][fid]:
                 p = points[variant]
                 if p is None:
@@ -185,8 +203,9 @@ def errors_against_true_marks(out: dict, max_snap: float = 0.0045) -> dict:
                 e = p - truth
                 along.append(float(e @ ray))
                 across.append(float(np.linalg.norm(e - (e @ ray) * ray)))
+                incidence.append(math.acos(min(1.0, abs(float(ray @ (X_CH[:3, :3] @ normal))))))
             if along:
-                result[variant][fid] = (np.array(along), np.array(across))
+                result[variant][fid] = (np.array(along), np.array(across), np.array(incidence))
     return {"errors": result, "snaps": snaps}
 
 
@@ -221,6 +240,15 @@ def main() -> None:
               f"{rotation_spread(c.statistic):6.3f}      {1e3 * c.solution.expected_rms:8.2f} {leader}")
     for a in out["bank"].adoptions:
         print(f"adoption t={a.time:.2f} feature {a.feature_id} kind {a.kind}")
+    # Why the candidates' refined points are missing, and how their tracks end (the tracker's id
+    # gone: lost by Lucas-Kanade or its checks; a candidate's samples also stop when it is dropped).
+    frames = [r for rows in out["reasons"].values() for r in rows]
+    if frames:
+        no_corner = sum(not r[1] for r in frames) / len(frames)
+        no_depth = sum(r[1] and not r[2] for r in frames) / len(frames)
+        print(f"\nRefined points of the candidates' tracked frames ({len(frames)}): no corner/blob within "
+              f"{out['compare'].max_shift_px:g} px {100 * no_corner:.1f} %, no clean depth "
+              f"{100 * no_depth:.1f} %")
     truth = errors_against_true_marks(out)
     far = {fid: d for fid, d in truth["snaps"].items() if d > 0.0045}
     print(f"\nErrors against the true checker mark (mm; {len(truth['snaps']) - len(far)} of "
@@ -232,7 +260,7 @@ def main() -> None:
         cells = []
         for v in VARIANTS:
             if fid in truth["errors"][v]:
-                along, across = truth["errors"][v][fid]
+                along, across, _ = truth["errors"][v][fid]
                 rms = 1e3 * np.sqrt(np.mean(along**2))
                 cells.append(f"{len(along):5d} {1e3 * along.mean():7.2f} {rms:6.2f} "
                              f"{1e3 * np.sqrt(np.mean(across**2)):6.2f}".rjust(40))
@@ -247,6 +275,13 @@ def main() -> None:
             print(f"{v:>14}: {along.size} samples, along the ray mean {1e3 * along.mean():.2f} mm, "
                   f"RMS {1e3 * np.sqrt(np.mean(along**2)):.2f} mm; across RMS "
                   f"{1e3 * np.sqrt(np.mean(across**2)):.2f} mm")
+            incidence = np.degrees(np.concatenate([p[2] for p in pooled]))
+            for lo, hi in ((0, 30), (30, 45), (45, 60), (60, 75), (75, 90)):
+                m = (incidence >= lo) & (incidence < hi)
+                if m.any():
+                    print(f"{'':>16}face seen at {lo:2d}-{hi:2d} deg: {m.sum():5d} samples, along mean "
+                          f"{1e3 * along[m].mean():6.2f} RMS {1e3 * np.sqrt(np.mean(along[m]**2)):5.2f} mm, "
+                          f"across RMS {1e3 * np.sqrt(np.mean(across[m]**2)):5.2f} mm")
 
 
 if __name__ == "__main__":

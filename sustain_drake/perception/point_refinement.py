@@ -10,7 +10,11 @@ identifier that assumes a point fixed on the hand (Eq. (30)) reads that drift as
   position with ``cv2.cornerSubPix`` (the point where the image gradients in the window are
   orthogonal to the offset: a checker saddle, an L corner, or the centre of a square smaller than
   the window). The track's drift only has to stay within the window; the refined point does not
-  accumulate it;
+  accumulate it. On the rod the tracker's features are the yellow cells' centres (its Shi-Tomasi
+  block of 7 px is larger than a 6-7 x 7-9 px cell; ``bench_hand_eye_candidates.py`` snaps them
+  to the rod's known marks), of which the 5 x 5 window sees part of the edges only; with
+  ``blob_window_px`` a feature on a small bright mark is moved to the whole mark's intensity
+  centroid instead (``blob_centres``);
 - the depth comes from a small window of the depth image around the refined pixel, taken only
   when at least ``min_fraction`` of the window is within ``surface_tolerance`` of the window's
   median (a window that straddles a silhouette mixes the tool and the background: no point).
@@ -113,32 +117,34 @@ def blob_centres(gray: np.ndarray, p_px: np.ndarray, half: int, min_contrast: fl
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
     centres, is_blob = np.full(p.shape, np.nan), np.zeros(p.shape[0], bool)
     h, w = g.shape
+    finite = np.isfinite(p).all(axis=1)
+    u0 = np.rint(np.where(finite, p[:, 0], -1)).astype(np.int64)
+    v0 = np.rint(np.where(finite, p[:, 1], -1)).astype(np.int64)
+    inside = np.flatnonzero(finite & (u0 >= half) & (u0 < w - half) & (v0 >= half) & (v0 < h - half))
+    if inside.size == 0:
+        return centres, is_blob
+    # Every window at once; only the bright, contrasted ones (a few of the features) go on to the
+    # per-window connected components.
+    offsets = np.arange(-half, half + 1)
+    windows = g[v0[inside, None, None] + offsets[None, :, None],
+                u0[inside, None, None] + offsets[None, None, :]]
+    lo, hi = np.percentile(windows.reshape(inside.size, -1), (10, 90), axis=1)
+    mid = 0.5 * (lo + hi)
+    maybe = (hi - lo >= min_contrast) & (windows[:, half, half] > mid)
     kernel = np.ones((3, 3), np.uint8)
-    for k, (u, v) in enumerate(p):
-        if not np.isfinite(u + v):
-            continue
-        u0, v0 = int(round(u)), int(round(v))
-        if not (half <= u0 < w - half and half <= v0 < h - half):
-            continue
-        window = g[v0 - half:v0 + half + 1, u0 - half:u0 + half + 1]
-        lo, hi = np.percentile(window, (10, 90))
-        if hi - lo < min_contrast:
-            continue
-        bright = (window > 0.5 * (lo + hi)).astype(np.uint8)
-        _, labels = cv2.connectedComponents(bright, connectivity=4)
-        label = labels[half, half]
-        if label == 0:
-            continue
-        region = labels == label
+    rows, cols = np.mgrid[-half:half + 1, -half:half + 1]
+    for j in np.flatnonzero(maybe):
+        k, window = inside[j], windows[j]
+        _, labels = cv2.connectedComponents((window > mid[j]).astype(np.uint8), connectivity=4)
+        region = labels == labels[half, half]
         touches_border = region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any()
         if region.sum() < 4 or touches_border:
             continue
         # Its anti-aliased edge, but not another mark's pixels (a checker's diagonal neighbours).
         grown = cv2.dilate(region.astype(np.uint8), kernel).astype(bool) & ((labels == 0) | region)
-        weight = np.clip((window - lo) / (hi - lo), 0.0, 1.0) * grown
+        weight = np.clip((window - lo[j]) / (hi[j] - lo[j]), 0.0, 1.0) * grown
         total = weight.sum()
-        rows, cols = np.mgrid[-half:half + 1, -half:half + 1]
-        centres[k] = (u0 + (weight * cols).sum() / total, v0 + (weight * rows).sum() / total)
+        centres[k] = (u0[k] + (weight * cols).sum() / total, v0[k] + (weight * rows).sum() / total)
         is_blob[k] = True
     return centres, is_blob
 
