@@ -59,8 +59,10 @@ class HandEyeConfig:
     the identify <-> observe state machine.
 
     ``camera_motion``: the camera-motion detector (off by default: the paper's observation rule
-    alone). ``refine_points``: feed the candidates the refined points (``FeatureRefiner``: sub-pixel
-    corner and robust depth, ``refinement``) instead of the tracker's. ``false_alarm_window``: s, a
+    alone). ``identifying_motion_interval``: s; > 0: while identifying, ask the babbling for a far
+    posture when no confirming request came for that long (``systems.identifying_motion``); 0: off.
+    ``refine_points``: feed the candidates the refined points (``FeatureRefiner``: sub-pixel corner
+    and robust depth, ``refinement``) instead of the tracker's. ``false_alarm_window``: s, a
     detection with no disturbance in that long before it is a false alarm (evaluation only).
     ``log_rate``: samples per second of the logged signals (plots)."""
 
@@ -68,6 +70,7 @@ class HandEyeConfig:
     coordination: CoordinationConfig = field(default_factory=CoordinationConfig)
     candidates: CandidatesConfig = field(default_factory=CandidatesConfig)
     camera_motion: CameraMotionConfig = field(default_factory=CameraMotionConfig)
+    identifying_motion_interval: float = 0.0
     refine_points: bool = True
     refinement: RefinementConfig = field(default_factory=RefinementConfig)
     false_alarm_window: float = 2.0

@@ -1,0 +1,90 @@
+"""``IdentifyingMotion``: while the hand-eye loop identifies, ask the babbling for far postures
+(richer motion), between the coincidence detector's confirming requests (beyond the paper)."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from sustain_drake.identification import coordination
+
+# State vector: [output id, last detector id seen, time of the last request (own or detector's),
+# own requests so far], then the output request [joint, q_1..q_n].
+_ID, _DETECTOR_ID, _LAST_TIME, _OWN = range(4)
+
+
+class IdentifyingMotion(LeafSystem):
+    """Forwards the ``MotionCoincidenceDetector``'s confirming requests to the motion generator and,
+    while the state machine is in IDENTIFY and no request came for ``interval`` s, adds its own:
+    go to the farthest (max-norm, rad) of ``num_draws`` postures drawn uniformly in
+    ``joint_ranges`` from the current one. Eq. (30)'s statistic converges when the hand turns
+    through several axes (a gap ``lambda_15 / lambda_16`` and a rotation, SSD); the random babbling
+    sometimes stays near one posture for tens of seconds.
+
+    .. pydrake_system::
+
+        name: IdentifyingMotion
+        input_ports:
+        - detector_confirm (optional)
+        - mode
+        - joint_positions
+        output_ports:
+        - confirm
+
+    Inputs: ``detector_confirm`` (``[request_id, joint, q_1..q_n]``, the detector's ``confirm``),
+    ``mode`` (the ``CoordinationStateMachine``'s), ``joint_positions`` (n, rad). Output:
+    ``confirm`` (``[request_id, joint, q_1..q_n]``, the motion generator's ``confirm`` format: a new
+    id is a new request; connect to the station's ``motion_confirm``). Every ``period`` s a
+    periodic discrete update; the draws come from a generator seeded with (``seed``, request
+    number), so runs reproduce and contexts clone.
+    """
+
+    def __init__(self, joint_ranges, interval: float = 2.5, num_draws: int = 8, seed: int = 0,
+                 period: float = 1.0 / 30.0):  # fmt: skip
+        super().__init__()
+        ranges = np.asarray(joint_ranges, float)
+        if ranges.ndim != 2 or ranges.shape[1] != 2 or not np.all(ranges[:, 1] > ranges[:, 0]):
+            raise ValueError(f"IdentifyingMotion: joint_ranges must be n x [lower, upper], got "
+                             f"{joint_ranges}")
+        if not (interval > 0 and num_draws >= 1 and period > 0):
+            raise ValueError("IdentifyingMotion: interval and period must be > 0, num_draws >= 1")
+        self._ranges, self._interval = ranges, float(interval)
+        self._draws, self._seed = int(num_draws), int(seed)
+        n = ranges.shape[0]
+        self._detector = self.DeclareVectorInputPort("detector_confirm", 2 + n)
+        self._mode = self.DeclareVectorInputPort("mode", 1)
+        self._q = self.DeclareVectorInputPort("joint_positions", n)
+        initial = np.zeros(4 + 1 + n)
+        initial[_LAST_TIME] = 0.0
+        initial[4] = -1.0
+        self._state = self.DeclareDiscreteState(initial)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclareVectorOutputPort(
+            "confirm", 2 + n, lambda c, o: o.SetFromVector(
+                np.concatenate([[self._vector(c)[_ID]], self._vector(c)[4:]])),
+            prerequisites_of_calc={self.discrete_state_ticket(self._state)})  # fmt: skip
+
+    def _vector(self, context) -> np.ndarray:
+        return context.get_discrete_state(self._state).value()
+
+    def _update(self, context, state) -> None:
+        x = self._vector(context).copy()
+        t = context.get_time()
+        request = self._detector.Eval(context) if self._detector.HasValue(context) else x[[_DETECTOR_ID]]
+        if request[0] != x[_DETECTOR_ID]:  # the detector's request first (body detection, §3.3)
+            x[_DETECTOR_ID] = request[0]
+            x[_ID] += 1
+            x[_LAST_TIME] = t
+            x[4:] = request[1:]
+        elif (int(self._mode.Eval(context)[0]) == coordination.IDENTIFY
+              and t - x[_LAST_TIME] >= self._interval):  # fmt: skip
+            q = np.asarray(self._q.Eval(context), float)
+            rng = np.random.default_rng([self._seed, int(x[_OWN])])
+            draws = rng.uniform(self._ranges[:, 0], self._ranges[:, 1], (self._draws, q.size))
+            far = draws[np.argmax(np.max(np.abs(draws - q), axis=1))]
+            x[_ID] += 1
+            x[_OWN] += 1
+            x[_LAST_TIME] = t
+            x[4] = -1.0  # a usual move after the rest there
+            x[5:] = far
+        state.get_mutable_vector(self._state).SetFromVector(x)

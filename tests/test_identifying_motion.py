@@ -1,0 +1,65 @@
+"""IdentifyingMotion: far postures while identifying, the detector's confirming requests first."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantVectorSource
+
+from sustain_drake.identification import coordination
+from sustain_drake.systems.identifying_motion import IdentifyingMotion
+
+RANGES = [[-0.7, 0.7], [0.2, 0.9], [0.7, 1.5], [-0.3, 1.0], [-1.2, 1.2]]
+Q = np.array([0.0, 0.6, 1.1, 0.5, 0.0])
+
+
+class Scripted(LeafSystem):
+    """The state machine's mode (IDENTIFY before ``t_observe``) and the detector's requests (one,
+    id 1, at ``t_request``)."""
+
+    def __init__(self, t_observe, t_request):
+        super().__init__()
+        self.DeclareVectorOutputPort("mode", 1, lambda c, o: o.SetAtIndex(
+            0, coordination.OBSERVE if c.get_time() >= t_observe else coordination.IDENTIFY))  # fmt: skip
+        self.DeclareVectorOutputPort("confirm", 7, lambda c, o: o.SetFromVector(
+            [1.0, 2.0, *Q] if c.get_time() >= t_request else np.zeros(7)))  # fmt: skip
+
+
+def simulate(t_observe, t_request, until):
+    builder = DiagramBuilder()
+    scripted = builder.AddSystem(Scripted(t_observe, t_request))
+    motion = builder.AddSystem(IdentifyingMotion(RANGES, interval=1.0, seed=3, period=0.1))
+    q = builder.AddSystem(ConstantVectorSource(Q))
+    builder.Connect(scripted.GetOutputPort("mode"), motion.GetInputPort("mode"))
+    builder.Connect(scripted.GetOutputPort("confirm"), motion.GetInputPort("detector_confirm"))
+    builder.Connect(q.get_output_port(), motion.GetInputPort("joint_positions"))
+    simulator = Simulator(builder.Build())
+    outputs = []
+    for t in np.arange(0.1, until + 1e-9, 0.1):
+        simulator.AdvanceTo(t)
+        outputs.append(np.array(motion.GetOutputPort("confirm").Eval(
+            motion.GetMyContextFromRoot(simulator.get_context()))))  # fmt: skip
+    return np.array(outputs)
+
+
+def test_far_postures_while_identifying_and_the_detector_first():
+    out = simulate(t_observe=np.inf, t_request=1.5, until=4.0)
+    ids = out[:, 0]
+    # Identifying, no request for 1 s: its own request (a usual move after it, joint -1), far
+    # from the current posture and within the ranges.
+    first = np.flatnonzero(ids == 1)[0]
+    assert out[first, 1] == -1.0
+    far = out[first, 2:]
+    assert np.all(far >= np.array(RANGES)[:, 0]) and np.all(far <= np.array(RANGES)[:, 1])
+    assert np.max(np.abs(far - Q)) > 0.5
+    # The detector's request at 1.5 s is forwarded at once, as it is (joint 2, its posture).
+    forwarded = np.flatnonzero(ids == 2)[0]
+    assert forwarded == pytest.approx(14, abs=1) and list(out[forwarded, 1:]) == [2.0, *Q]
+    # Then its own again after each second without requests (2.5 s, 3.5 s), each a new posture.
+    assert list(ids[[forwarded + 9, forwarded + 11, -1]]) == [2, 3, 4] and out[-1, 1] == -1.0
+    assert not np.allclose(out[-1, 2:], far)
+
+
+def test_nothing_of_its_own_while_observing():
+    out = simulate(t_observe=0.0, t_request=np.inf, until=3.0)
+    assert out[:, 0].max() == 0
