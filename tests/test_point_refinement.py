@@ -113,6 +113,14 @@ def test_the_depth_of_a_slanted_face_is_read_at_the_sub_pixel_point():
     # rounded window's median is off by the sub-pixel offset (0.4 px) times the gradient.
     assert np.max(np.abs(plane - exact)) < 2e-5
     assert np.min(np.abs(median - exact)) > 0.3 * gradient
+    # The face's incidence (ray against normal, 29-31 deg at these pixels) from the fitted plane:
+    # a limit half a degree above every point's keeps them all, half a degree below none.
+    rays = np.c_[(points[:, 0] - K.cx) / K.fx, (points[:, 1] - K.cy) / K.fy, np.ones(3)]
+    angles = np.degrees(np.arccos(np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)))
+    assert 28 < angles.min() and angles.max() < 32
+    for limit, kept in ((angles.max() + 0.5, True), (angles.min() - 0.5, False)):
+        z = local_depth(depth, points, RefinementParams(depth_plane=True, max_incidence_deg=limit), K)
+        assert np.isfinite(z).all() if kept else np.isnan(z).all()
     # With the station's per-pixel noise (1.3 mm), over many draws: unbiased,
     # and the noise of one pixel divided by about the window's side.
     rng = np.random.default_rng(1)

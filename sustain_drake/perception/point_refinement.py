@@ -55,6 +55,10 @@ class RefinementParams:
         finds its centre, not its corners) is moved to the mark's intensity centroid
         (``blob_centres``, half side of the window in px) when the mark lies wholly inside the
         window; otherwise (a corner, an edge) ``cornerSubPix``'s pixel is kept. 0: off.
+    max_incidence_deg: with ``depth_plane``, a point whose fitted face is seen more obliquely than
+        this (the angle between its ray and the face's normal) is not valid: a pixel's error along
+        the face is ``tan`` of it times as large along the ray (``bench_hand_eye_candidates.py``:
+        along-ray RMS 1.1-1.9 mm at 30-45 deg, 3.3-4.9 mm at 45-60 deg on the rod). 90: off.
     """
 
     corner_window_px: int = 2
@@ -64,10 +68,13 @@ class RefinementParams:
     min_fraction: float = 0.7
     depth_plane: bool = False
     blob_window_px: int = 0
+    max_incidence_deg: float = 90.0
 
     def __post_init__(self):
         if self.corner_window_px < 0 or self.depth_window_px < 0 or self.blob_window_px < 0:
             raise ValueError(f"window sizes must be >= 0 ({self})")
+        if not 0 < self.max_incidence_deg <= 90:
+            raise ValueError(f"max_incidence_deg must be in (0, 90] ({self})")
         if not (self.max_shift_px > 0 and self.surface_tolerance > 0 and 0 < self.min_fraction <= 1):
             raise ValueError(f"max_shift_px, surface_tolerance and min_fraction must be positive ({self})")
 
@@ -149,12 +156,14 @@ def blob_centres(gray: np.ndarray, p_px: np.ndarray, half: int, min_contrast: fl
     return centres, is_blob
 
 
-def local_depth(depth: np.ndarray, p_px: np.ndarray, params: RefinementParams) -> np.ndarray:
+def local_depth(depth: np.ndarray, p_px: np.ndarray, params: RefinementParams,
+                intrinsics: PinholeIntrinsics | None = None) -> np.ndarray:
     """Robust depth at each (sub-pixel) pixel (m), from the ``(2 k + 1)^2`` window around the
     rounded pixel: NaN when fewer than ``min_fraction`` of its pixels are valid and within
     ``surface_tolerance`` of the window's median; else the median, or with ``depth_plane`` the
     depth where the pixel's own ray meets the plane fitted to those same-surface pixels
-    (``plane_depth``)."""
+    (``plane_depth``), NaN too when ``intrinsics`` are given and that plane is seen beyond
+    ``max_incidence_deg`` (``incidence``)."""
     d = np.asarray(depth, dtype=float)
     if d.ndim == 3:
         d = d[:, :, 0]
@@ -183,18 +192,22 @@ def local_depth(depth: np.ndarray, p_px: np.ndarray, params: RefinementParams) -
         # Offsets from the sub-pixel point itself, so that the fit's intercept is its depth.
         du = du.ravel()[None, :] - (p[inside, 0] - u[inside])[:, None]
         dv = dv.ravel()[None, :] - (p[inside, 1] - v[inside])[:, None]
-        values = plane_depth(window, same & good[:, None], du, dv)[0]
+        values, coef = plane_depth(window, same & good[:, None], du, dv)
+        if intrinsics is not None and params.max_incidence_deg < 90.0:
+            steep = incidence(coef, p[inside], intrinsics) > np.radians(params.max_incidence_deg)
+            values = np.where(steep, np.nan, values)
     out[inside] = np.where(good, values, np.nan)
     return out
 
 
 def plane_depth(z: np.ndarray, use: np.ndarray, du: np.ndarray, dv: np.ndarray):
-    """Depth (m) at pixel offset (0, 0) of the plane through the 3-D points of a depth window,
-    and the plane's depth at every pixel of the window: ``(K,), (K x n)`` for ``K`` windows of
-    ``n`` pixels (``z``), the pixels to fit (``use``) and their offsets ``du, dv`` (px).
+    """Depth (m) at pixel offset (0, 0) of the plane through the 3-D points of a depth window, and
+    the plane's inverse depth ``(a, b, c)`` (``1 / z = a + b du + c dv``): ``(K,), (K x 3)`` for
+    ``K`` windows of ``n`` pixels (``z``), the pixels to fit (``use``) and their offsets ``du, dv``
+    (px).
 
-    A plane ``n . p_C = c`` in the camera frame and the pinhole ray ``p_C = z r(u, v)``, with
-    ``r = ((u - c_x) / f_x, (v - c_y) / f_y, 1)`` affine in the pixel, give ``1 / z = n . r / c``:
+    A plane ``n . p_C = d`` in the camera frame and the pinhole ray ``p_C = z r(u, v)``, with
+    ``r = ((u - c_x) / f_x, (v - c_y) / f_y, 1)`` affine in the pixel, give ``1 / z = n . r / d``:
     the inverse depth of a plane is exactly affine in the pixel offsets, whatever the intrinsics.
     So a linear least-squares fit of ``1 / z = a + b du + c dv`` over the pixels ``use`` is the
     plane fitted with its errors along the rays (the depth camera's, with the same relative weight
@@ -210,11 +223,25 @@ def plane_depth(z: np.ndarray, use: np.ndarray, du: np.ndarray, dv: np.ndarray):
     ok = np.linalg.cond(H) < 1e8 if H.size else np.zeros(0, bool)
     if ok.any():
         coef[ok] = np.linalg.solve(H[ok], g[ok][:, :, None])[:, :, 0]
-    inv_plane = np.einsum("kni,ki->kn", A, coef)
     with np.errstate(all="ignore"):
-        plane = np.where(inv_plane > 0, 1.0 / inv_plane, np.nan)
         at_point = np.where(coef[:, 0] > 0, 1.0 / coef[:, 0], np.nan)
-    return at_point, plane
+    return at_point, coef
+
+
+def incidence(coef: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics) -> np.ndarray:
+    """The angle (rad) between the camera ray at each pixel ``p_px`` and the normal of the plane
+    whose inverse depth about that pixel is ``coef`` (``plane_depth``): with ``1 / z = (n . r) / d``,
+    ``n / d = (b f_x, c f_y, a - b (u - c_x) - c (v - c_y))`` and ``n . r / d = a`` at the pixel.
+    0 for a face seen head-on, pi/2 at a grazing view (where a pixel's error along the face is
+    ``tan`` of it times as large along the ray)."""
+    a, b, c = coef[:, 0], coef[:, 1], coef[:, 2]
+    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
+    x, y = (p[:, 0] - intrinsics.cx) / intrinsics.fx, (p[:, 1] - intrinsics.cy) / intrinsics.fy
+    n = np.stack([b * intrinsics.fx, c * intrinsics.fy, a - b * (p[:, 0] - intrinsics.cx)
+                  - c * (p[:, 1] - intrinsics.cy)], axis=1)
+    with np.errstate(all="ignore"):
+        cosine = np.abs(a) / (np.linalg.norm(n, axis=1) * np.sqrt(x * x + y * y + 1.0))
+    return np.arccos(np.clip(cosine, 0.0, 1.0))
 
 
 def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
@@ -228,7 +255,7 @@ def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrin
         out = np.zeros((p.shape[0], 3)), np.zeros(p.shape[0], bool)
         return (*out, p.copy()) if return_pixels else out
     refined, ok = refine_pixels(to_gray(np.asarray(image)), p, params)
-    z = local_depth(depth, refined, params)
+    z = local_depth(depth, refined, params, intrinsics)
     ok &= np.isfinite(z) & (z > 0)
     p_CP = np.zeros((p.shape[0], 3))
     p_CP[ok] = pinhole_points(refined[ok], z[ok], intrinsics)  # with the robust depth
