@@ -7,7 +7,7 @@ camera position error (and the part along the optical axis), rotation error and 
 of the model in use at the end of the run (``model_in_use_at_end``: with ``adopt_refinements``
 the adopted model refined while observing) and the false alarms.
 
-    .venv/bin/python bench/bench_hand_eye_accuracy.py [--seeds 3 1 2 4] [--duration 25] [--jobs 2]
+    .venv/bin/python bench/bench_hand_eye_accuracy.py [--seeds 3 1 2 4] [--duration 50] [--scenario S]
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", type=Path, default=ROOT / "diagrams" / "hand_eye.yaml")
     parser.add_argument("--seeds", type=int, nargs="+", default=[3, 1, 2, 4])
-    parser.add_argument("--duration", type=float, default=25.0)
+    parser.add_argument("--duration", type=float, default=50.0)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "bench_hand_eye_accuracy")
     args = parser.parse_args()
