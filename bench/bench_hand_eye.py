@@ -1,11 +1,12 @@
 """Hand-eye coordination end to end over several seeds (issue 5 targets), through the code path
 of ``sustain-drake simulate SCENARIO --seed N`` (``simulate_scenario``).
 
-    .venv/bin/python bench/bench_hand_eye.py [--seeds 3 1 2 4] [--jobs 2] [--duration 130]
+    .venv/bin/python bench/bench_hand_eye.py [--seeds scenario 1 2 4] [--jobs 2] [--duration 130]
 
 Each seed is one run of ``diagrams/hand_eye.yaml`` (130 s: the slip at 75 s, the head move at
 113 s, the walking person) with the seed overriding the motion, the sensor noise and the
-person's start (the scenario's own seed is 3); its outputs go to ``--out/seed_N/``
+person's start; ``--seeds scenario`` (the default's first entry) is the scenario's own seeds, the
+run of ``sustain-drake simulate diagrams/hand_eye.yaml``; its outputs go to ``--out/seed_N/``
 (metrics.json, the Fig. 9 plot). Prints one row per seed, one line per adoption and per
 disturbance, and checks the targets on every seed: each adopted camera within 2 mm and 0.2 deg,
 each adopted tool point within 2 mm, the first convergence within 15 s of the tool point being
@@ -40,14 +41,15 @@ TARGETS = {
 }
 
 
-def run_seed(scenario: Path, out: Path, duration: float | None, seed: int) -> dict:
-    result = simulate_scenario(scenario, duration=duration, out=out / f"seed_{seed}", replay=False,
+def run_seed(scenario: Path, out: Path, duration: float | None, seed: int | None) -> dict:
+    """One run's figures; ``seed`` None keeps the scenario's own seeds."""
+    result = simulate_scenario(scenario, duration=duration, out=out / f"seed_{_name(seed)}", replay=False,
                                seed=seed)
     m = json.loads(result.metrics.read_text())["hand_eye"]
     adopted = m["adopted"]
     disturbances = m["disturbances"]
     return {
-        "seed": seed, "wall_s": result.wall, "metrics": m,
+        "seed": _name(seed), "wall_s": result.wall, "metrics": m,
         "camera_position_mm": [a["camera_position_error_mm"] for a in adopted],
         "camera_rotation_deg": [a["camera_rotation_error_deg"] for a in adopted],
         "tool_point_mm": [a["tool_point_error_mm"] for a in adopted],
@@ -57,6 +59,14 @@ def run_seed(scenario: Path, out: Path, duration: float | None, seed: int) -> di
         "reconvergence_after_detection_s": [d["reconvergence_after_detection_s"] for d in disturbances],
         "false_alarms": m["num_false_alarms"],
     }
+
+
+def _name(seed: int | None) -> str:
+    return "scenario" if seed is None else str(seed)
+
+
+def _seed(text: str) -> int | None:
+    return None if text == "scenario" else int(text)
 
 
 def _met(value, op: str, bound: float) -> bool:
@@ -72,7 +82,8 @@ def _fmt(value, spec: str = ".2f") -> str:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenario", type=Path, default=ROOT / "diagrams" / "hand_eye.yaml")
-    p.add_argument("--seeds", type=int, nargs="+", default=[3, 1, 2, 4])
+    p.add_argument("--seeds", type=_seed, nargs="+", default=[None, 1, 2, 4],
+                   help="motion seeds; 'scenario': the scenario's own (default: scenario 1 2 4)")
     p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
     p.add_argument("--jobs", type=int, default=1, help="seeds simulated in parallel")
     p.add_argument("--out", type=Path, default=ROOT / "out" / "bench_hand_eye")
@@ -94,7 +105,7 @@ def main(argv=None) -> int:
         first = _fmt(r["first_convergence_after_found_s"], ".1f")
         print(f"| {r['seed']} | {first} s | {adoptions or 'none'} | {changes} | {alarms} "
               f"| {r['wall_s']:.0f} s |")
-    summary = {"seeds": args.seeds, "rows": rows, "targets": {}}
+    summary = {"seeds": [_name(x) for x in args.seeds], "rows": rows, "targets": {}}
     for name, (op, bound) in TARGETS.items():
         met = [_met(r[name], op, bound) for r in rows]
         summary["targets"][name] = {"target": f"{op} {bound:g}", "seeds_met": sum(met),

@@ -1,4 +1,5 @@
-"""Perception math for body detection by motion coincidence (paper §3.3, §4.2).
+"""Perception math: body detection by motion coincidence (paper §3.3, §4.2) and what the hand-eye
+loop needs of the images (§4.3).
 
 Pure numpy + OpenCV (no pydrake import):
 
@@ -7,6 +8,8 @@ Pure numpy + OpenCV (no pydrake import):
 - :mod:`.coincidence`: onset detectors ρ_a, ρ_s, the causal AND of Eq. (27), ε_ij, and the body
   rule (confirming motions and counter-evidence).
 - :mod:`.body_features`: the same confirming trials per tracked feature (which corners are body).
+- :mod:`.point_refinement`: drift-free 3-D points of tracked features (sub-pixel mark, robust depth).
+- :mod:`.camera_motion`: the camera notices its own motion from the static scene (beyond the paper).
 - :mod:`.evaluation`: per-cell ground truth from a label image, metrics, likelihood-map pictures.
 - :mod:`.synthetic`: synthetic per-cell signals for tests and benchmarks.
 """
