@@ -260,3 +260,27 @@ def test_the_state_machine_takes_the_camera_motion_input():
     assert events[0].time < 5.0 and events[1].time == pytest.approx(5.0)
     # Nothing adopted while the camera moved (to 6 s), then re-identified from fresh samples.
     assert 6.0 + 0.1 * 9 <= events[2].time < 12.0
+
+
+def test_a_camera_move_clears_the_adopted_model():
+    """After a camera move the adopted estimate is dropped (zeros: nothing for the candidates to
+    keep as the previous camera, which would be the moved one) until the next convergence."""
+    truth, _, _, _ = build(t_slip=np.inf)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ScriptedHandPoint(truth, truth.p_HP, np.inf, 0.1))
+    ident = builder.AddSystem(SustainableIdentifierSystem(EyeToHandFormulation(), period=0.1))
+    sm = builder.AddSystem(CoordinationStateMachine(16, period=0.1))
+    camera = builder.AddSystem(ScriptedCameraMotion(5.0, 1.0))
+    builder.Connect(source.GetOutputPort("p_CP"), ident.GetInputPort("p_CP"))
+    builder.Connect(source.GetOutputPort("X_WH"), ident.GetInputPort("X_WH"))
+    builder.Connect(camera.get_output_port(), sm.GetInputPort("camera_motion"))
+    connect_identify_observe(builder, ident, sm)
+    simulator = Simulator(builder.Build())
+    context = sm.GetMyContextFromRoot(simulator.get_context())
+    simulator.AdvanceTo(4.9)
+    assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)
+    simulator.AdvanceTo(5.5)
+    assert not np.any(sm.GetOutputPort("adopted_x").Eval(context))
+    assert sm.GetOutputPort("adopted_solution").Eval(context) is None
+    simulator.AdvanceTo(12.0)
+    assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)  # re-identified

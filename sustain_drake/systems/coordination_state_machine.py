@@ -33,9 +33,10 @@ class CoordinationStateMachine(LeafSystem):
     the verdict and ``a^2 lambda_N``) and ``observation`` (``[sample_count, s_t]``, where ``s_t``
     is the newest sample's error under ``adopted_x``: connect ``adopted_x`` to the identifier's
     ``reference_x``). ``camera_motion`` (optional, 2: ``[moving, moves]`` of a
-    ``CameraMotionDetector``; beyond the paper): a new camera move is a change detection and the
-    identifier is kept reset while the camera moves (``coordination.step``); unconnected, the
-    paper's rule alone.
+    ``CameraMotionDetector``; beyond the paper): a new camera move is a change detection, the
+    identifier is kept reset while the camera moves (``coordination.step``), and the adopted
+    estimate is cleared (``adopted_x`` zeros: the moved camera is not kept as the previous one);
+    unconnected, the paper's rule alone.
 
     Outputs: ``mode`` (1: 0 IDENTIFY, 1 OBSERVE); ``adopted_x`` (N, zeros before the first
     convergence); ``adopted_solution`` (the identifier's solution at adoption, or None);
@@ -63,6 +64,7 @@ class CoordinationStateMachine(LeafSystem):
         self._camera_motion = self.DeclareVectorInputPort("camera_motion", 2)
         self._state = self.DeclareDiscreteState(coordination.initial_state())
         self._adopted_x = self.DeclareDiscreteState(np.zeros(num_unknowns))
+        self._adopted_x_size = int(num_unknowns)
         self._adopted = self.DeclareAbstractState(AbstractValue.Make(None))
         self._events = self.DeclareAbstractState(AbstractValue.Make(()))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
@@ -122,3 +124,8 @@ class CoordinationStateMachine(LeafSystem):
             if event.kind in (coordination.CONVERGED, coordination.REFINED):
                 state.get_mutable_abstract_state(self._adopted).set_value(solution)
                 state.get_mutable_discrete_state(self._adopted_x).set_value(solution.x)
+            elif event.detail == coordination.CAMERA_MOVED_DETAIL:
+                # The camera is known to have moved: its model is dropped, not offered again as the
+                # "previous camera" that a slipped tool would leave in place.
+                state.get_mutable_abstract_state(self._adopted).set_value(None)
+                state.get_mutable_discrete_state(self._adopted_x).set_value(np.zeros(self._adopted_x_size))
