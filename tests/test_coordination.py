@@ -241,7 +241,9 @@ class ScriptedCameraMotion(LeafSystem):
             [float(t0 <= c.get_time() < t0 + duration), float(c.get_time() >= t0)]))  # fmt: skip
 
 
-def test_the_state_machine_takes_the_camera_motion_input():
+def camera_moving_loop():
+    """A point on a babbling hand seen by a fixed camera that moves from 5 s to 6 s: the identifier
+    and the state machine, with the camera-motion input. Returns ``(simulator, state machine)``."""
     truth, _, _, _ = build(t_slip=np.inf)
     builder = DiagramBuilder()
     source = builder.AddSystem(ScriptedHandPoint(truth, truth.p_HP, np.inf, 0.1))
@@ -253,6 +255,11 @@ def test_the_state_machine_takes_the_camera_motion_input():
     builder.Connect(camera.get_output_port(), sm.GetInputPort("camera_motion"))
     connect_identify_observe(builder, ident, sm)
     simulator = Simulator(builder.Build())
+    return simulator, sm
+
+
+def test_the_state_machine_takes_the_camera_motion_input():
+    simulator, sm = camera_moving_loop()
     simulator.AdvanceTo(12.0)
     events = sm.events(sm.GetMyContextFromRoot(simulator.get_context()))
     assert [e.kind for e in events] == [coordination.CONVERGED, coordination.CHANGE_DETECTED,
@@ -265,17 +272,7 @@ def test_the_state_machine_takes_the_camera_motion_input():
 def test_a_camera_move_clears_the_adopted_model():
     """After a camera move the adopted estimate is dropped (zeros: nothing for the candidates to
     keep as the previous camera, which would be the moved one) until the next convergence."""
-    truth, _, _, _ = build(t_slip=np.inf)
-    builder = DiagramBuilder()
-    source = builder.AddSystem(ScriptedHandPoint(truth, truth.p_HP, np.inf, 0.1))
-    ident = builder.AddSystem(SustainableIdentifierSystem(EyeToHandFormulation(), period=0.1))
-    sm = builder.AddSystem(CoordinationStateMachine(16, period=0.1))
-    camera = builder.AddSystem(ScriptedCameraMotion(5.0, 1.0))
-    builder.Connect(source.GetOutputPort("p_CP"), ident.GetInputPort("p_CP"))
-    builder.Connect(source.GetOutputPort("X_WH"), ident.GetInputPort("X_WH"))
-    builder.Connect(camera.get_output_port(), sm.GetInputPort("camera_motion"))
-    connect_identify_observe(builder, ident, sm)
-    simulator = Simulator(builder.Build())
+    simulator, sm = camera_moving_loop()
     context = sm.GetMyContextFromRoot(simulator.get_context())
     simulator.AdvanceTo(4.9)
     assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)
