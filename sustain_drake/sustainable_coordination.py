@@ -288,6 +288,10 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     if plant is None and not (hand_frame is None and sensor_frame is None and model_instance is None):
         raise ValueError("make_sustainable_coordination: hand_frame, sensor_frame and model_instance "
                          "need a plant")  # fmt: skip
+    if hand_eye.identifying_motion_interval > 0:
+        raise ValueError("make_sustainable_coordination: hand_eye.identifying_motion_interval is the "
+                         "simulated experiment's babbling option (your motion generator reads "
+                         "motion_confirm and hand_eye_mode); set it to 0")  # fmt: skip
     builder = DiagramBuilder()
     vision = add_hand_eye_loop(builder, camera_info, num_joints, fps, hand_eye, body_detection)
     touch = add_payload_loop(builder, num_joints, kinesthetic, held_shape, X_KG)

@@ -55,8 +55,7 @@ class IdentifyingMotion(LeafSystem):
         self._mode = self.DeclareVectorInputPort("mode", 1)
         self._q = self.DeclareVectorInputPort("joint_positions", n)
         initial = np.zeros(4 + 1 + n)
-        initial[_LAST_TIME] = 0.0
-        initial[4] = -1.0
+        initial[4] = -1.0  # the output request's joint: -1, a usual move
         self._state = self.DeclareDiscreteState(initial)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort(
