@@ -89,7 +89,8 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
     true camera, rod tip, p_CP, X_WH) for the ``refinement``'s points (the tracker's if None), and
     ``versions[id]`` rows of (X_CH true, {variant: p_CP or None}) for the three ``VARIANTS`` (the
     refined ones with ``compare``'s other settings)."""
-    scenario = load_scenario(scenario_path)
+    # A path, or a scenario already loaded (and changed) by the caller.
+    scenario = load_scenario(scenario_path) if isinstance(scenario_path, (str, Path)) else scenario_path
     if seed is not None:
         apply_seed(scenario, seed)
     builder = DiagramBuilder()
