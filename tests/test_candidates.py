@@ -514,3 +514,51 @@ def test_stitching_tracks_of_one_point_pins_the_camera_and_keeps_other_marks_apa
     assert merged[-1] == sum(s[-1] for s in statistics[:3])  # counts add: one identifier of the point
     with pytest.raises(ValueError, match="stitch_radius"):
         CandidateParams(stitch_radius=-1.0)
+
+
+def _slip_with_every_track_lost(params, slip):
+    """9 (the tool point, leader) and 4, 5 (more tool points) are observed under the true model;
+    at frame 300 the tool slips by ``slip`` (in H) and every track ends at once (the tracker lost
+    them in the jump); from then on new tracks (ids + 100) of the same three marks. Returns
+    ``{frame: (sample_count, sample_error)}`` and the final bank."""
+    points = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05]}
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+    bank, rng, counts = CandidateBank(), np.random.default_rng(3), {}
+    for k in range(480):
+        X = hand_pose(k)
+        after = k >= 300
+        ids = [i + 100 * after for i in points]
+        p = [seen(X, points[i] + (slip if after else 0.0), rng) for i in points]
+        bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
+                               np.ones(3, bool), np.ones(3, bool), x_true, allowable_error=1e-4)
+        counts[k] = (bank.sample_count, bank.sample_error)
+    return counts, bank
+
+
+def test_a_point_first_tracked_while_blind_does_not_take_over_the_observation_and_tells_a_slip():
+    """``verified_overlap``, ``unverified_evidence``: after a slip that ended every observed track,
+    the new tracks of the tool fit the adopted camera with their own ``p_HP`` (the camera did not
+    move), so handing the observation over to them re-learns the tool point and hides the slip (the
+    old rule). With the rule, a point can observe only with samples taken while the model was
+    verified; the new ones cannot, and once they qualify otherwise each blind frame is a violation.
+    Without a slip, the new track of the observed point is re-acquired where the model puts it."""
+    slip = np.array([0.0, 0.0, 0.04])
+    old = replace(HANDOVER, max_observers=2)
+    counts, bank = _slip_with_every_track_lost(old, slip)
+    resumed = [k for k in range(301, 480) if counts[k][0] > counts[k - 1][0]]
+    assert resumed and max(counts[k][1] for k in resumed) < 2e-5  # the slip is hidden
+    assert bank.observed >= 100
+
+    new = replace(old, verified_overlap=30, unverified_evidence=True)
+    counts, bank = _slip_with_every_track_lost(new, slip)
+    resumed = [k for k in range(301, 480) if counts[k][0] > counts[k - 1][0]]
+    # Blind until the new tracks have observe_min_samples (50), then a violation every frame.
+    assert resumed and 300 + 49 <= resumed[0] <= 300 + 60 and len(resumed) == 480 - resumed[0]
+    assert all(counts[k][1] == math.inf for k in resumed)
+    assert bank.observed == -1 and not bank.observers
+    # Before the slip the candidates were verified while observing: they did observe.
+    assert max(counts[k][1] for k in range(200, 300)) < 2e-5 and counts[299][0] - counts[200][0] == 99
+
+    counts, bank = _slip_with_every_track_lost(new, np.zeros(3))  # no slip: re-acquired at once
+    assert counts[479][0] - counts[301][0] == 178 and max(counts[k][1] for k in range(301, 480)) < 2e-5
+    assert bank.observed == 109

@@ -121,6 +121,20 @@ class CandidateParams:
             one point: their statistics are summed (``stitch``), so that the point's ``p_HP`` and
             the camera are constrained by the rotation of all of them (0: one point per track).
         pose_tolerance: s, how far the nearest hand pose may be from a frame's capture time.
+        verified_overlap: > 0: a candidate can witness, observe or take over the observation only
+            with at least this many samples taken while the adopted model was *verified* (at the
+            adoption, and on every frame where a tool point observed within the allowable error):
+            its ``p_HP``, learned under the adopted camera, is then tied to the tool as the model
+            knows it. A point first tracked while the observation was blind fits the adopted camera
+            with its own ``p_HP`` whether or not the tool moved in the gap (a slipped tool leaves
+            the camera in place), so handing the observation over to it would re-learn the tool
+            point unchecked and hide the slip (0: any candidate with ``observe_min_samples``).
+        unverified_evidence: on a frame with no observed point, a tool candidate that qualifies
+            to observe in every way but ``verified_overlap`` (the adopted camera explains it with
+            its own ``p_HP``: the tool is in view, but none of its points the model verified) is a
+            sample over the allowable error (``s_t`` = inf): the tool point the model holds can no
+            longer be checked, as after a slip that ended every observed track; the paper's
+            consecutive-violation count then decides (False: such frames give no sample).
     """
 
     max_candidates: int = 8
@@ -147,10 +161,13 @@ class CandidateParams:
     observe_radius: float = math.inf
     blind_min_samples: int = 0
     stitch_radius: float = 0.0
+    verified_overlap: int = 0
+    unverified_evidence: bool = False
 
     def __post_init__(self):
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
-                and self.max_archived >= 0 and self.max_observers >= 0 and self.blind_min_samples >= 0):
+                and self.max_archived >= 0 and self.max_observers >= 0 and self.blind_min_samples >= 0
+                and self.verified_overlap >= 0):
             raise ValueError(f"observe_min_samples and primary_failures must be >= 1 ({self})")
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
@@ -179,6 +196,7 @@ class Candidate:
     last_sample: float  # s, time of the last sample fed (admission time before any)
     last_p_CP: np.ndarray | None = None  # the last measured point (accepted or not), for the gate
     last_X_WH: np.ndarray | None = None
+    verified_samples: int = 0  # its samples taken up to the last frame the adopted model was verified
 
 
 @dataclass(frozen=True)
@@ -242,6 +260,7 @@ class CandidateBank:
     refinement: int = 0  # refinements offered since construction (never reset)
     sample_errors: tuple = ()  # this frame's s_t of the observed point and its witness (m^2)
     last_refinement: float = -math.inf  # s
+    tool_observed: bool = False  # a tool point gave this frame's observation sample
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -456,6 +475,7 @@ def step(
     # Before a leader, a frame that fed any identifier counts as a sample (the state machine
     # checks a solution's samples against the count since a reset); after, observations count.
     count = bank.sample_count + (1 if fed and bank.leader < 0 else 0)
+    new_leader = leader != bank.leader
     bank = replace(bank, candidates=tuple(kept), leader=leader, rejected=rejected, round_start=round_start,
                    sample_count=count, archive=tuple(archive),
                    last_frame=float(frame_time), adoptions=adoptions,
@@ -464,8 +484,10 @@ def step(
                    observed_p_HP=bank.observed_p_HP if leader == bank.leader else None,
                    witness=bank.witness if leader == bank.leader else -1,
                    adopted_mse=adopted_mse)
-    if leader != bank.leader:
+    if new_leader:
         bank = replace(bank, refined_solution=None, last_refinement=float(frame_time))
+        if leader >= 0:
+            bank = _verified(bank)  # the candidates the new model was identified among
     elif (leader >= 0 and params.refine_interval > 0 and x_is_set(reference_x)
           and frame_time - bank.last_refinement >= params.refine_interval):
         bank = _refine_adopted(bank, params, reference_x, float(frame_time))
@@ -676,10 +698,50 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     body moves every point of its group (a slipped tool the tool's, a moved camera all), a tracking
     failure one; and while the observed point is lost (its face turned away, or its track ended in
     the change itself) the observers keep the observation going, so a change is not missed for
-    want of the one point the paper observes."""
+    want of the one point the paper observes.
+
+    A frame whose sample includes a tool point within the allowable error *verifies* the model:
+    every candidate's samples so far count as taken under a verified model (``verified_overlap``).
+    A frame with no sample may count as a violation (``unverified_evidence``)."""
+    before = bank.sample_count
+    bank = _observe_points(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
+                           allowable_error)  # fmt: skip
+    if bank.leader < 0 or bank.sample_count > before:
+        if bank.leader >= 0 and bank.tool_observed and bank.sample_error <= allowable_error:
+            bank = _verified(bank)  # a tool point the model holds was seen where the model puts it
+        return bank
+    x = _model_in_use(bank, reference_x)
+    if x is not None and params.unverified_evidence and _unverified_tool(bank, params, row, usable, x,
+                                                                          (p_CP, X_WH)):
+        return replace(bank, sample_count=before + 1, sample_error=math.inf, sample_errors=())
+    return bank
+
+
+def _verified(bank: CandidateBank) -> CandidateBank:
+    """Every candidate's samples so far were taken while the model was verified (``verified_overlap``)."""
+    return replace(bank, candidates=tuple(c if c.verified_samples == c.solution.num_samples
+                                          else replace(c, verified_samples=c.solution.num_samples)
+                                          for c in bank.candidates))
+
+
+def _unverified_tool(bank, params, row, usable, x, frame) -> bool:
+    """``unverified_evidence``: whether a tool candidate (within ``observe_radius`` of the adopted
+    tool point) is explained by the adopted camera with its own ``p_HP`` but lacks the
+    ``verified_overlap`` samples to observe."""
+    if params.verified_overlap == 0:
+        return False
+    options = _near_tool(_consistent(bank, params, row, usable, x, frame), x[12:15].copy(), params)
+    return any(bank.find(o[1]).verified_samples < params.verified_overlap for o in options)
+
+
+def _observe_points(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
+                    allowable_error=math.inf) -> CandidateBank:
+    """The observed, witness and observer points' ``s_t`` (see ``_observe``); ``tool_observed``
+    says whether a tool point gave one this frame."""
     before = bank.sample_count
     bank = _observe_primary(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
                             allowable_error)  # fmt: skip
+    bank = replace(bank, tool_observed=bank.sample_count > before)  # the observed point is the tool's
     if params.max_observers == 0:
         return bank
     x = _model_in_use(bank, reference_x)
@@ -698,7 +760,7 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
         observers.append((feature_id, p_HP, last))
     if len(observers) < params.max_observers:
         taken = {o[0] for o in observers} | {bank.observed, bank.witness}
-        options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=tuple(taken))
+        options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=tuple(taken), verified=True)
         # The tool's points first (nearest the adopted tool point), then the hand's.
         for _, feature_id, p_HP, k in sorted(options, key=lambda o: float(np.linalg.norm(o[2] - anchor))):
             if len(observers) >= params.max_observers:
@@ -718,7 +780,8 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     # point re-acquired near the prediction by chance) moves it neither up nor down. The larger of
     # the two groups' is reported: a slipped tool moves the tool's points only, a moved camera all.
     reported = max(_lower_median([e for e, tool in errors if tool == group]) for group in (True, False))
-    return replace(bank, sample_count=before + 1, sample_error=reported)
+    return replace(bank, sample_count=before + 1, sample_error=reported,
+                   tool_observed=any(tool for _, tool in errors))
 
 
 def _blind_evidence(bank, params, row, usable, x, allowable_error: float, before: int) -> CandidateBank:
@@ -825,11 +888,12 @@ def _gated_row(feature_id, last, row, p_CP, X_WH, params):
     return k
 
 
-def _consistent(bank, params, row, usable, x, frame, exclude=()):
+def _consistent(bank, params, row, usable, x, frame, exclude=(), verified=False):
     """Candidates tracked now whose samples the adopted camera explains (each with its own best
     ``p_HP``, least squares from its statistic), and whose point in this ``frame`` (``(p_CP,
     X_WH)``) too (a frozen candidate's track may have slid onto the background since):
-    ``[(mse, feature_id, p_HP, row)]``."""
+    ``[(mse, feature_id, p_HP, row)]``. ``verified``: only candidates with ``verified_overlap``
+    samples taken while the adopted model was verified (the points that may observe it)."""
     p_now, X_now = frame
     R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
     limit = params.observe_consistency**2 * bank.adopted_mse
@@ -840,6 +904,8 @@ def _consistent(bank, params, row, usable, x, frame, exclude=()):
             continue
         if c.solution.num_samples < params.observe_min_samples:
             continue
+        if verified and c.verified_samples < params.verified_overlap:
+            continue  # first tracked while the model was not verified: its p_HP is unchecked
         if rotation_spread(c.statistic) < params.min_rotation_spread:
             continue  # the hand hardly turned: any point, even on another link, would fit
         p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
@@ -863,7 +929,8 @@ def _near_tool(options, anchor, params: CandidateParams) -> list:
 
 
 def _choose_witness(bank, params, row, usable, x, frame, anchor) -> CandidateBank:
-    options = _consistent(bank, params, row, usable, x, frame, exclude=(bank.observed, bank.leader))
+    options = _consistent(bank, params, row, usable, x, frame, exclude=(bank.observed, bank.leader),
+                          verified=True)  # fmt: skip
     options = _near_tool(options, anchor, params)
     if not options:
         return replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
@@ -885,7 +952,7 @@ def _reacquire(bank, params, X_WH, ids, p_CP, usable, body, row, x, anchor) -> C
             if bank.observed == bank.witness:
                 bank = replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
             return bank
-    options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=(bank.observed,))
+    options = _consistent(bank, params, row, usable, x, (p_CP, X_WH), exclude=(bank.observed,), verified=True)
     # The consistent point nearest in H to the adopted tool point: the observation stays on the
     # tool (a chain of hand-overs must not drift onto the hand, which does not see the tool slip).
     options = _near_tool(options, anchor, params)
