@@ -5,7 +5,12 @@ import numpy as np
 import pytest
 
 from sustain_drake.perception.optical_flow import PinholeIntrinsics
-from sustain_drake.perception.point_refinement import RefinementParams, local_depth, refine_points
+from sustain_drake.perception.point_refinement import (
+    RefinementParams,
+    central_symmetry,
+    local_depth,
+    refine_points,
+)
 
 K = PinholeIntrinsics(width=160, height=120, fx=145.0, fy=145.0, cx=79.5, cy=59.5)
 SADDLE = (70.3, 50.6)  # px, a checker saddle at a sub-pixel position
@@ -57,6 +62,10 @@ def test_a_window_across_a_silhouette_gives_no_point():
 def test_params_validation():
     with pytest.raises(ValueError, match="window"):
         RefinementParams(corner_window_px=-1)
+    with pytest.raises(ValueError, match="window"):
+        RefinementParams(symmetry_window_px=-1)
+    with pytest.raises(ValueError, match="min_symmetry"):
+        RefinementParams(min_symmetry=1.5)
     with pytest.raises(ValueError, match="min_fraction"):
         RefinementParams(min_fraction=0.0)
 
@@ -185,3 +194,41 @@ def test_a_feature_on_a_small_cell_is_moved_to_the_cell_centroid():
     assert not is_blob[0] and np.isnan(centres[0]).all()
     # Too little contrast (a plain patch): no blob.
     assert not blob_centres(np.full((K.height, K.width), 90, np.uint8), np.array([[70.0, 50.0]]), 6)[1][0]
+
+
+def square_image(corner=(60.3, 40.6), size=14.0, scale=8):
+    """A bright square on black whose top-left corner is ``corner`` (an L corner), drawn 8x larger
+    and shrunk with area averaging."""
+    h, w = K.height * scale, K.width * scale
+    v, u = np.mgrid[0:h, 0:w]
+    uu, vv = (u + 0.5) / scale - 0.5 - corner[0], (v + 0.5) / scale - 0.5 - corner[1]
+    inside = (uu >= 0) & (uu < size) & (vv >= 0) & (vv < size)
+    gray = np.where(inside, 220, 15).astype(np.uint8)
+    return cv2.resize(gray, (K.width, K.height), interpolation=cv2.INTER_AREA)
+
+
+def test_central_symmetry_tells_a_saddle_from_an_l_corner_an_edge_and_a_flat_patch():
+    gray = cv2.cvtColor(checker_image(), cv2.COLOR_RGBA2GRAY)
+    square = square_image()
+    assert central_symmetry(gray, np.array([SADDLE]), 3)[0] > 0.9
+    assert central_symmetry(square, np.array([[60.3, 40.6]]), 3)[0] < 0.0  # the L corner itself
+    assert central_symmetry(square, np.array([[60.3, 47.0]]), 3)[0] < -0.8  # on the square's edge
+    flat = np.full((K.height, K.width), 128, np.uint8)
+    outside = np.array([[1.0, 1.0], [70.0, 50.0]])
+    assert np.all(central_symmetry(flat, outside, 3) == -1.0)
+
+
+def test_with_the_symmetry_test_only_saddles_are_points():
+    depth = np.full((K.height, K.width), 0.8, np.float32)
+    params = RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3)
+    # Shi-Tomasi (block 7) puts a square's L corner ~2.5 px inside the square: cornerSubPix finds the
+    # corner with a 9 x 9 window, but an L corner is no point (its sub-pixel position depends on
+    # the view); a flat patch is none either (without the test both were kept as valid).
+    inside_l = np.array([[60.3 + 2.5, 40.6 + 2.5], [20.0, 100.0]])
+    _, valid = refine_points(square_image(), depth, inside_l, K, params)
+    assert not valid.any()
+    assert refine_points(square_image(), depth, inside_l, K, RefinementParams())[1].all()
+    # A saddle 2.8 px from the tracked pixel is found and kept.
+    tracked = np.array([[SADDLE[0] + 2.0, SADDLE[1] - 2.0]])
+    p_CP, valid, p_px = refine_points(checker_image(), depth, tracked, K, params, return_pixels=True)
+    assert valid[0] and np.linalg.norm(p_px[0] - SADDLE) < 0.15

@@ -55,6 +55,16 @@ class RefinementParams:
         finds its centre, not its corners) is moved to the mark's intensity centroid
         (``blob_centres``, half side of the window in px) when the mark lies wholly inside the
         window; otherwise (a corner, an edge) ``cornerSubPix``'s pixel is kept. 0: off.
+    symmetry_window_px: > 0: a refined pixel is a point only if the image is centrally symmetric
+        about it (``central_symmetry`` over the ``(2 k + 1)^2`` window, at least ``min_symmetry``): a
+        checker saddle or the centre of a small mark, whose image stays centrally symmetric about
+        the projected point under any view (locally, a view is affine, and an affine map keeps
+        central symmetry), so the sub-pixel point does not move on the tool as the view changes. An
+        L corner of a cell against the margin is not symmetric, and ``cornerSubPix`` puts it inside
+        the blurred corner by an amount that depends on the projected angle: an error of a
+        millimetre that follows the view (``bench/bench_hand_eye_error_budget.py``). 0: off.
+    min_symmetry: the least normalised correlation of the window with itself turned by 180 deg
+        (1 for a perfectly symmetric window, -1 for a straight edge).
     max_incidence_deg: with ``depth_plane``, a point whose fitted face is seen more obliquely than
         this (the angle between its ray and the face's normal) is not valid: a pixel's error along
         the face is ``tan`` of it times as large along the ray (``bench_hand_eye_candidates.py``:
@@ -69,9 +79,14 @@ class RefinementParams:
     depth_plane: bool = False
     blob_window_px: int = 0
     max_incidence_deg: float = 90.0
+    symmetry_window_px: int = 0
+    min_symmetry: float = 0.5
 
     def __post_init__(self):
-        if self.corner_window_px < 0 or self.depth_window_px < 0 or self.blob_window_px < 0:
+        if not -1.0 <= self.min_symmetry <= 1.0:
+            raise ValueError(f"min_symmetry must be in [-1, 1] ({self})")
+        if (self.corner_window_px < 0 or self.depth_window_px < 0 or self.blob_window_px < 0
+                or self.symmetry_window_px < 0):
             raise ValueError(f"window sizes must be >= 0 ({self})")
         if not 0 < self.max_incidence_deg <= 90:
             raise ValueError(f"max_incidence_deg must be in (0, 90] ({self})")
@@ -103,7 +118,31 @@ def refine_pixels(gray: np.ndarray, p_px: np.ndarray, params: RefinementParams):
         refined = np.where(is_blob[:, None], centres, refined)
     ok &= np.isfinite(refined).all(axis=1)
     ok &= np.linalg.norm(refined - p, axis=1) <= params.max_shift_px
+    if params.symmetry_window_px > 0 and ok.any():
+        ok[ok] = central_symmetry(gray, refined[ok], params.symmetry_window_px) >= params.min_symmetry
     return refined, ok
+
+
+def central_symmetry(gray: np.ndarray, p_px: np.ndarray, half: int) -> np.ndarray:
+    """How centrally symmetric the image is about each sub-pixel point (K,): the normalised
+    correlation of the ``(2 half + 1)^2`` window centred on the point (bilinear, ``cv2.getRectSubPix``)
+    with the same window turned by 180 deg, both less the window's mean. 1 for a checker saddle or a
+    round mark's centre, about -1 on a straight edge, in between for an L corner; -1 for a window
+    that leaves the image or has no texture."""
+    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
+    g = np.asarray(gray, dtype=np.float32)
+    side = 2 * half + 1
+    out = np.full(p.shape[0], -1.0)
+    h, w = g.shape
+    for k, (u, v) in enumerate(p):
+        if not (half <= u <= w - 1 - half and half <= v <= h - 1 - half):
+            continue
+        window = cv2.getRectSubPix(g, (side, side), (float(u), float(v))).astype(float)
+        window -= window.mean()
+        energy = float((window * window).sum())
+        if energy > 1e-6 * side * side:
+            out[k] = float((window * window[::-1, ::-1]).sum()) / energy
+    return out
 
 
 def blob_centres(gray: np.ndarray, p_px: np.ndarray, half: int, min_contrast: float = 40.0):
