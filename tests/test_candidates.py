@@ -562,3 +562,34 @@ def test_a_point_first_tracked_while_blind_does_not_take_over_the_observation_an
     counts, bank = _slip_with_every_track_lost(new, np.zeros(3))  # no slip: re-acquired at once
     assert counts[479][0] - counts[301][0] == 178 and max(counts[k][1] for k in range(301, 480)) < 2e-5
     assert bank.observed == 109
+
+
+@pytest.mark.parametrize("keep", [False, True])
+def test_a_kept_camera_keeps_the_allowable_error_of_its_identification(keep):
+    """``keep_allowable_error``: after a slip the new tool point, seen with twice the noise,
+    is adopted with the kept camera; its own mean squared error under that camera is about four
+    times the identification's, and would widen the allowable error as much. With the key, the
+    adopted model reports the expected error of the identification that found the camera."""
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+    slipped = P_TOOL + [0.0, 0.03, 0.04]
+
+    def before(k, X, rng):
+        return None if k >= 200 else ([9], [seen(X, P_TOOL, rng)], [True], [True])
+
+    bank, k = run(before, reference=x_true)
+    identified = bank.adopted_mse
+    assert bank.adoptions[-1].kind == "identified" and identified < (1e-3) ** 2
+
+    def after(k, X, rng):  # up to the adoption (30 samples): what the state machine then adopts
+        return None if k >= 230 else ([9], [seen(X, slipped, rng, noise=1e-3)], [True], [True])
+
+    params = CandidateParams(observe_min_samples=30, confirm_with_witness=False, keep_allowable_error=keep)
+    bank, _ = run(after, bank, reset=1.0, reference=x_true, start=k, params=params)
+    assert bank.adoptions[-1].kind == "previous camera" and bank.adoptions[-1].time == pytest.approx(229 * DT)
+    own = candidates.mean_squared_error_of(bank.find(9).statistic, bank.find(9).solution.x)
+    expected = bank.find(9).solution.expected_mse
+    assert own > 2.5 * identified  # the noisier point fits the kept camera less well
+    if keep:
+        assert expected == identified
+    else:
+        assert expected == pytest.approx(own, rel=1e-6)

@@ -129,6 +129,13 @@ class CandidateParams:
             with its own ``p_HP`` whether or not the tool moved in the gap (a slipped tool leaves
             the camera in place), so handing the observation over to it would re-learn the tool
             point unchecked and hide the slip (0: any candidate with ``observe_min_samples``).
+        keep_allowable_error: a model adopted with the previous camera (``keep_camera``) reports
+            as its expected error (which sets the allowable error) at most the expected error of
+            the identification that found that camera: only ``p_HP`` is new (3 unknowns, the
+            camera kept), and a candidate the kept camera explains less well (up to
+            ``observe_consistency`` times the RMS) would otherwise widen the allowable error by up
+            to ``observe_consistency^2`` and hide a later slip of that size (False: the
+            candidate's own mean squared error under the kept camera).
         unverified_evidence: on a frame with no observed point, a tool candidate that qualifies
             to observe in every way but ``verified_overlap`` (the adopted camera explains it with
             its own ``p_HP``: the tool is in view, but none of its points the model verified) is a
@@ -163,6 +170,7 @@ class CandidateParams:
     stitch_radius: float = 0.0
     verified_overlap: int = 0
     unverified_evidence: bool = False
+    keep_allowable_error: bool = False
 
     def __post_init__(self):
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
@@ -467,7 +475,10 @@ def step(
             if options:
                 mse, leader, p_HP, _ = min(options, key=lambda o: o[0])
                 best = next(c for c in kept if c.feature_id == leader)
-                best = _with_camera(best, bank.previous_x, p_HP, mse)
+                # Its expected error sets the allowable error (Eq. (2)'s sigma); with
+                # keep_allowable_error, at most that of the identification whose camera is kept.
+                expected = min(mse, bank.adopted_mse) if params.keep_allowable_error else mse
+                best = _with_camera(best, bank.previous_x, p_HP, expected)
                 kept = [best if c.feature_id == leader else c for c in kept]
                 adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
                                                   best.admitted, round_start, best.solution.estimate,
