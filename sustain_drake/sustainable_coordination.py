@@ -29,6 +29,7 @@ from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers, Fe
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.ground_truth import PoseToVector
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
+from sustain_drake.systems.identifying_motion import IdentifyingMotion
 from sustain_drake.systems.lcm_converters import ForceTorqueToWrench, ImageArrayTime
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
@@ -49,15 +50,27 @@ class HandEyeLoop:
     state_machine: CoordinationStateMachine
     refiner: FeatureRefiner | None = None
     camera_motion: CameraMotionDetector | None = None
+    identifying_motion: IdentifyingMotion | None = None
 
     def image_inputs(self, name: str) -> list:
         """The input ports that take the camera's ``name`` (color_image, depth_image, image_time)."""
         return [s.GetInputPort(name) for s in (self.tracker, self.refiner) if s is not None]
 
     def actuator_inputs(self) -> list:
-        """The input ports that take the joint positions (the detector's, the camera-motion detector's)."""
+        """The input ports that take the joint positions (the detector's, the camera-motion
+        detector's, the identifying motion's)."""
         systems = (self.detector, self.camera_motion)
-        return [s.GetInputPort("actuator_positions") for s in systems if s is not None]
+        ports = [s.GetInputPort("actuator_positions") for s in systems if s is not None]
+        if self.identifying_motion is not None:
+            ports.append(self.identifying_motion.GetInputPort("joint_positions"))
+        return ports
+
+    def motion_confirm(self):
+        """The output port the motion generator's confirming requests come from: the detector's
+        ``confirm`` (paper §3.3), through the identifying motion when there is one."""
+        if self.identifying_motion is not None:
+            return self.identifying_motion.GetOutputPort("confirm")
+        return self.detector.GetOutputPort("confirm")
 
 
 @dataclass
@@ -69,14 +82,20 @@ class PayloadLoop:
 
 
 def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: HandEyeConfig,
-                      perception: BodyDetectionConfig) -> HandEyeLoop:  # fmt: skip
+                      perception: BodyDetectionConfig, joint_ranges=None, motion_seed: int = 0,
+                      ) -> HandEyeLoop:  # fmt: skip
     """Adds the tracker, detector, candidate identifiers and state machine, connected to each other.
     With ``hand_eye.camera_motion.enabled``, a ``CameraMotionDetector`` feeds the state machine's
-    ``camera_motion``. Left for the caller: the images (``HandEyeLoop.image_inputs``: the tracker's
-    and, with ``hand_eye.refine_points``, the ``FeatureRefiner``'s), the joint positions
-    (``HandEyeLoop.actuator_inputs``: the detector's and the camera-motion detector's),
-    the candidates' ``X_WH``, and the uses of ``detector.confirm`` and ``state_machine.pause``.
-    Raises ValueError on bad settings."""
+    ``camera_motion``; with ``hand_eye.identifying_motion_interval`` > 0, an ``IdentifyingMotion``
+    (far postures within ``joint_ranges``, n x [lower, upper] rad, drawn from ``motion_seed``)
+    forwards the detector's confirming requests and adds its own while identifying. Left for the
+    caller: the images (``HandEyeLoop.image_inputs``: the tracker's and, with
+    ``hand_eye.refine_points``, the ``FeatureRefiner``'s), the joint positions
+    (``HandEyeLoop.actuator_inputs``), the candidates' ``X_WH``, and the uses of
+    ``HandEyeLoop.motion_confirm()`` and ``state_machine.pause``. Raises ValueError on bad settings."""
+    if hand_eye.identifying_motion_interval > 0 and joint_ranges is None:
+        raise ValueError("hand_eye.identifying_motion_interval needs the babbling's joint_ranges "
+                         "(the postures it may ask for)")  # fmt: skip
     criteria, rule = hand_eye.coordination.criteria(), hand_eye.coordination.rule()
     candidate_params = hand_eye.candidates.params()
     coincidence_params = perception.coincidence_params()
@@ -121,7 +140,15 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         builder.Connect(camera.GetOutputPort("camera_motion"), machine.GetInputPort("camera_motion"))
         # The identifiers' candidates without the static scene's features (stale body cells).
         builder.Connect(camera.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
-    return HandEyeLoop(tracker, detector, candidates, machine, refiner, camera)
+    motion = None
+    if hand_eye.identifying_motion_interval > 0:  # far postures while identifying (richer motion)
+        motion = builder.AddSystem(IdentifyingMotion(
+            joint_ranges, hand_eye.identifying_motion_interval, seed=motion_seed, period=period))  # fmt: skip
+        motion.set_name("identifying_motion")
+        if perception.confirm:  # the detector's confirming requests first (body detection, §3.3)
+            builder.Connect(detector.GetOutputPort("confirm"), motion.GetInputPort("detector_confirm"))
+        builder.Connect(machine.GetOutputPort("mode"), motion.GetInputPort("mode"))
+    return HandEyeLoop(tracker, detector, candidates, machine, refiner, camera, motion)
 
 
 def connect_identify_observe(builder, identifier, machine) -> None:
@@ -222,6 +249,7 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
                                   kinesthetic: KinestheticConfig | None = None,
                                   plant=None, hand_frame=None, sensor_frame=None, model_instance=None,
                                   held_shape=None, X_KG: RigidTransform | None = None,
+                                  joint_ranges=None, motion_seed: int = 0,
                                   ) -> Diagram:  # fmt: skip
     """The sustainable coordination of an arm with ``num_joints`` joints, a depth camera with
     intrinsics ``camera_info`` (``pydrake.systems.sensors.CameraInfo``) at ``fps`` frames per
@@ -230,7 +258,9 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     the hand pose (and the sensor pose, at ``sensor_frame``, else the hand's) is computed from the
     joint positions (``HandPoseFromPlant``); else it is the ``X_WH`` input and the sensor frame K is
     the hand frame H. ``held_shape`` (the held object's ``pydrake.geometry`` shape at ``X_KG`` in K)
-    adds the touch estimator.
+    adds the touch estimator. ``joint_ranges`` (n x [lower, upper], rad) are the postures the
+    identifying motion may ask for (needed with ``hand_eye.identifying_motion_interval`` > 0; its
+    draws come from ``motion_seed``).
 
     .. pydrake_system::
 
@@ -275,7 +305,8 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     ``camera_motion`` (2, ``[moving, moves]``: the camera noticed its own motion from the static
     scene, ``CameraMotionDetector``; each new move is a hand-eye change detection);
     the touch estimator's ``touch``, ``p_WP``, ``f_env_W``; for the user's motion generator
-    ``motion_confirm`` (the detector's confirming-motion request, paper §3.3) and
+    ``motion_confirm`` (the detector's confirming-motion request, paper §3.3, and with
+    ``hand_eye.identifying_motion_interval`` the identifying motion's far postures) and
     ``hand_eye_pause`` and ``payload_pause`` (2 each, ``[request_id, seconds]``: each state
     machine asks the motion to stop after a convergence; a new id is a new request); ``X_WH_used``
     and ``X_WK_used`` (the hand and sensor poses the loops use).
@@ -288,12 +319,12 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     if plant is None and not (hand_frame is None and sensor_frame is None and model_instance is None):
         raise ValueError("make_sustainable_coordination: hand_frame, sensor_frame and model_instance "
                          "need a plant")  # fmt: skip
-    if hand_eye.identifying_motion_interval > 0:
-        raise ValueError("make_sustainable_coordination: hand_eye.identifying_motion_interval is the "
-                         "simulated experiment's babbling option (your motion generator reads "
-                         "motion_confirm and hand_eye_mode); set it to 0")  # fmt: skip
     builder = DiagramBuilder()
-    vision = add_hand_eye_loop(builder, camera_info, num_joints, fps, hand_eye, body_detection)
+    try:
+        vision = add_hand_eye_loop(builder, camera_info, num_joints, fps, hand_eye, body_detection,
+                                   joint_ranges, motion_seed)  # fmt: skip
+    except ValueError as e:
+        raise ValueError(f"make_sustainable_coordination: {e}") from None
     touch = add_payload_loop(builder, num_joints, kinesthetic, held_shape, X_KG)
 
     for name in ("color_image", "depth_image", "image_time"):
@@ -342,7 +373,7 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     if touch.estimator is not None:
         for name in ("touch", "p_WP", "f_env_W"):
             builder.ExportOutput(touch.estimator.GetOutputPort(name), name)
-    builder.ExportOutput(vision.detector.GetOutputPort("confirm"), "motion_confirm")
+    builder.ExportOutput(vision.motion_confirm(), "motion_confirm")
     builder.ExportOutput(vision.state_machine.GetOutputPort("pause"), "hand_eye_pause")
     builder.ExportOutput(touch.state_machine.GetOutputPort("pause"), "payload_pause")
     builder.ExportOutput(X_WH, "X_WH_used")

@@ -176,9 +176,12 @@ def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
     with pytest.raises(ValueError, match="3 positions for num_joints = 6"):
         make_sustainable_coordination(info, 6, plant=three_joint_arm(),
                                       hand_frame=three_joint_arm().world_frame())  # fmt: skip
-    babbling = HandEyeConfig(identifying_motion_interval=2.0)  # the experiment's option, not here
-    with pytest.raises(ValueError, match="identifying_motion_interval"):
+    babbling = HandEyeConfig(identifying_motion_interval=2.0)  # far postures: within which ranges?
+    with pytest.raises(ValueError, match="identifying_motion_interval needs the babbling's joint_ranges"):
         make_sustainable_coordination(info, 6, hand_eye=babbling)
+    with_motion = make_sustainable_coordination(info, 6, hand_eye=babbling, joint_ranges=[[-1.0, 1.0]] * 6)
+    assert with_motion.GetOutputPort("motion_confirm").size() == 2 + 6
+    assert with_motion.GetSubsystemByName("identifying_motion") is not None
 
 
 def test_hand_pose_from_a_plant_with_other_bodies_reads_the_arm_instance_only():

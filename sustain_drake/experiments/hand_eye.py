@@ -40,7 +40,6 @@ from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.ground_truth import PoseToVector
-from sustain_drake.systems.identifying_motion import IdentifyingMotion
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 
@@ -71,29 +70,20 @@ def build_loop(builder, station, scenario):
         raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
     try:
         loop = add_hand_eye_loop(builder, camera_info(scenario), len(ARM_JOINTS), scenario.camera.fps,
-                                 config, perception)  # fmt: skip
+                                 config, perception, scenario.motion.joint_ranges,
+                                 scenario.motion.seed)  # fmt: skip
     except ValueError as e:
         raise ScenarioError(f"hand_eye: {e}") from None
-    detector, candidates, machine = loop.detector, loop.candidates, loop.state_machine
+    candidates, machine = loop.candidates, loop.state_machine
     for name in ("color_image", "depth_image", "image_time"):
         for port in loop.image_inputs(name):
             builder.Connect(station.GetOutputPort(name), port)
     for port in loop.actuator_inputs():
         builder.Connect(station.GetOutputPort("joint_positions"), port)
-    confirm = detector.GetOutputPort("confirm")
-    if config.identifying_motion_interval > 0:  # far postures while identifying (richer motion)
-        motion = builder.AddSystem(IdentifyingMotion(
-            scenario.motion.joint_ranges, config.identifying_motion_interval, seed=scenario.motion.seed,
-            period=1.0 / scenario.camera.fps))  # fmt: skip
-        motion.set_name("identifying_motion")
-        if perception.confirm:
-            builder.Connect(confirm, motion.GetInputPort("detector_confirm"))
-        builder.Connect(machine.GetOutputPort("mode"), motion.GetInputPort("mode"))
-        builder.Connect(station.GetOutputPort("joint_positions"), motion.GetInputPort("joint_positions"))
-        confirm = motion.GetOutputPort("confirm")
     if perception.confirm or config.identifying_motion_interval > 0:
-        # The detector's confirming motions (paper §3.3), as in body_detection
-        builder.Connect(confirm, station.GetInputPort("motion_confirm"))
+        # The detector's confirming motions (paper §3.3, as in body_detection), with the identifying
+        # motion's far postures while identifying.
+        builder.Connect(loop.motion_confirm(), station.GetInputPort("motion_confirm"))
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     return loop
