@@ -237,3 +237,32 @@ def test_identity_check_ends_a_track_whose_depth_jumps():
     # Depth noise of a few mm never ends a track.
     noisy = d0 + np.random.default_rng(1).normal(0, 0.005, d0.shape).astype(np.float32)
     assert track_frame(s0, rgba(img), noisy, DT, K, GRID).identity_drops == 0
+
+
+def checker_shifted(offset, period=16, scale=8):
+    """A checker of ``period`` px shifted right by ``offset`` px (drawn 8x larger, area-averaged)."""
+    v, u = np.mgrid[0:H * scale, 0:W * scale]
+    uu = ((u + 0.5) / scale - 0.5 - offset) / (period / 2)
+    vv = ((v + 0.5) / scale - 0.5) / (period / 2)
+    img = np.where((np.floor(uu) + np.floor(vv)) % 2 == 0, 220, 30).astype(np.uint8)
+    return cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)
+
+
+def test_predicted_flow_keeps_tracks_on_a_periodic_texture_moving_faster_than_half_its_period():
+    def correct_tracks(predict):
+        params = TrackerParams(predict_flow=predict)
+        s = track_frame(TrackerState.initial(GRID), rgba(checker_shifted(0.0)), None, 0.0, K, GRID, params)
+        start_u = dict(zip(s.features.ids, s.features.p_px[:, 0], strict=True))
+        x, v = 0.0, 0.0
+        for k in range(1, 12):  # accelerating by 2 px per frame up to 12 px: 3/4 of the 16 px period
+            v = min(v + 2.0, 12.0)
+            x += v
+            s = track_frame(s, rgba(checker_shifted(x)), None, k * DT, K, GRID, params)
+        f = s.features
+        errors = [u - start_u[i] - x for i, u in zip(f.ids, f.p_px[:, 0], strict=True)
+                  if i in start_u and 40 < u < W - 40]
+        return int(np.sum(np.abs(errors) < 0.5)), len(start_u)
+
+    kept, seeded = correct_tracks(True)
+    assert kept > 0.5 * seeded  # those not leaving the image, each on its own period
+    assert correct_tracks(False)[0] < 0.1 * seeded  # from rest, the coarse level loses them

@@ -28,6 +28,7 @@ class BodyDetectionConfig:
     # Tracker (Shi-Tomasi + pyramidal Lucas-Kanade).
     max_corners: int = _TRACKER.max_corners
     min_distance_px: float = _TRACKER.min_distance_px
+    predict_flow: bool = _TRACKER.predict_flow  # Lucas-Kanade started at the previous flow
     quality_level: float = _TRACKER.quality_level
     # Eq. (27): onset windows and what counts as motion.
     tau_a: float = _RULE.tau_a
@@ -81,4 +82,4 @@ class BodyDetectionConfig:
 
     def tracker_params(self) -> TrackerParams:
         return TrackerParams(max_corners=self.max_corners, min_distance_px=self.min_distance_px,
-                             quality_level=self.quality_level)
+                             quality_level=self.quality_level, predict_flow=self.predict_flow)

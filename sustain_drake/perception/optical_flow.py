@@ -129,6 +129,12 @@ class TrackerParams:
     ncc_patch_px: int = 9           # side of the square patch (odd)
     ncc_flat: float = 2.0           # gray-level std below which a patch has no texture
     depth_jump_m: float = 0.1       # depth change per frame above this ends the track; inf: no test
+    # Lucas-Kanade starts each feature at its previous frame's flow added (constant image velocity)
+    # instead of at rest: on a periodic texture (a checker) a frame-to-frame motion of more than
+    # half the period lets the coarse pyramid level lock onto the next period, and the track jumps
+    # by whole periods (25 mm rows on the rod, seen in hand-eye runs); with the prediction only the
+    # change of motion must stay below that. False: start at rest (OpenCV's default).
+    predict_flow: bool = False
 
     def __post_init__(self):
         if self.max_corners <= 0 or not 0.0 < self.reseed_fraction <= 1.0:
@@ -303,13 +309,18 @@ def _seed(gray: np.ndarray, p_px: np.ndarray, params: TrackerParams, count: int)
     return corners.reshape(-1, 2).astype(np.float32)
 
 
-def _lk(prev_gray: np.ndarray, next_gray: np.ndarray, pts: np.ndarray, params: TrackerParams):
+def _lk(prev_gray: np.ndarray, next_gray: np.ndarray, pts: np.ndarray, params: TrackerParams,
+        guess: np.ndarray | None = None):
+    """Pyramidal Lucas-Kanade from ``pts`` in ``prev_gray`` to ``next_gray``, started at ``guess``
+    (the points themselves if None)."""
     # OpenCV's Python binding takes images here, not pyramids from buildOpticalFlowPyramid.
     win = (params.lk_window_px, params.lk_window_px)
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03)
+    start = None if guess is None else guess.astype(np.float32).reshape(-1, 1, 2).copy()
+    flags = 0 if guess is None else cv2.OPTFLOW_USE_INITIAL_FLOW
     out, status, _ = cv2.calcOpticalFlowPyrLK(
-        prev_gray, next_gray, pts.reshape(-1, 1, 2), None, winSize=win,
-        maxLevel=params.lk_max_level, criteria=criteria)
+        prev_gray, next_gray, pts.reshape(-1, 1, 2), start, winSize=win,
+        maxLevel=params.lk_max_level, criteria=criteria, flags=flags)
     return out.reshape(-1, 2), status.reshape(-1).astype(bool)
 
 
@@ -389,14 +400,18 @@ def track_frame(state: TrackerState, image: np.ndarray, depth: np.ndarray | None
         # where it started (the forward–backward check rejects occlusion and patches that
         # changed, where LK "converges" to a wrong place).
         p0 = state.p_px.astype(np.float32)
-        p1, ok_f = _lk(state.prev_gray, gray, p0, params)
-        p0_back, ok_b = _lk(gray, state.prev_gray, p1, params)
+        prev = state.features
+        velocity = np.zeros_like(p0)
+        if params.predict_flow and len(prev) == p0.shape[0]:  # the previous frame's flows, same order
+            velocity = prev.flow_px.astype(np.float32)
+        guess = p0 + velocity if params.predict_flow else None
+        p1, ok_f = _lk(state.prev_gray, gray, p0, params, guess)
+        p0_back, ok_b = _lk(gray, state.prev_gray, p1, params, p1 - velocity if params.predict_flow else None)
         fb = np.linalg.norm(p0_back - p0, axis=1)
         h, w = gray.shape
         inside = (p1[:, 0] >= 0) & (p1[:, 0] <= w - 1) & (p1[:, 1] >= 0) & (p1[:, 1] <= h - 1)
         keep = ok_f & ok_b & inside & np.isfinite(p1).all(axis=1) & (fb < params.fb_threshold_px)
         # Track identity: the same surface in both frames, by appearance and by depth.
-        prev = state.features
         z0 = np.full(p0.shape[0], np.nan)
         if len(prev) == p0.shape[0]:    # the previous frame's features, in the tracks' order
             z0 = np.where(prev.valid, prev.p_CP[:, 2], np.nan)
