@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from bench_hand_eye_candidates import run  # noqa: E402  (bench/bench_hand_eye_candidates.py)
 
 from sustain_drake.cli.common import write_atomically  # noqa: E402
-from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, build_A, refine_joint  # noqa: E402
+from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, refine_joint  # noqa: E402
 from sustain_drake.identification.rotation import rotation_angle  # noqa: E402
 from sustain_drake.station import load_scenario  # noqa: E402
 
@@ -63,13 +63,12 @@ def split_at_gaps(tracks: dict, max_gap: float) -> dict:
     return out
 
 
-def statistic(P: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """The raw Eq. (30) statistic ``sum A_t^T A_t`` of points ``P`` (n x 3) at hand poses ``X``."""
-    S = np.zeros((16, 16))
+def identifier(P: np.ndarray, X: np.ndarray) -> EyeToHandIdentifier:
+    """The paper's identifier fed points ``P`` (n x 3) at hand poses ``X`` (n x 4 x 4)."""
+    ident = EyeToHandIdentifier()
     for p, x in zip(P, X, strict=True):
-        A = build_A(p, x[:3, :3], x[:3, 3])
-        S += A.T @ A
-    return S
+        ident.add_pose(p, x)
+    return ident
 
 
 def camera_error(R: np.ndarray, p: np.ndarray, X_WC: np.ndarray) -> tuple[float, float]:
@@ -78,12 +77,9 @@ def camera_error(R: np.ndarray, p: np.ndarray, X_WC: np.ndarray) -> tuple[float,
             math.degrees(rotation_angle(R.T @ X_WC[:3, :3])))
 
 
-def single_track(P: np.ndarray, X: np.ndarray, X_WC: np.ndarray):
-    """The paper's identifier on one track: (mm, deg), or None without an estimate."""
-    identifier = EyeToHandIdentifier()
-    for p, x in zip(P, X, strict=True):
-        identifier.add_pose(p, x)
-    estimate = identifier.solve().estimate
+def single_track(ident: EyeToHandIdentifier, X_WC: np.ndarray):
+    """The camera error of one track's own solution (mm, deg), or None without an estimate."""
+    estimate = ident.solve().estimate
     return None if estimate is None else camera_error(estimate.R_WC, estimate.p_WC, X_WC)
 
 
@@ -113,10 +109,12 @@ def budget(out: dict, max_gap: float, noise_along: float, noise_across: float, s
                  + rng.normal(0.0, noise_across, P.shape))
         samples = {"measured": P, "along only": truth + along[:, None] * ray,
                    "across only": truth + across, "white noise": white}
-        for name, Q in samples.items():
-            versions[name].append(statistic(Q, X))
+        identifiers = {name: identifier(Q, X) for name, Q in samples.items()}
+        for name, ident in identifiers.items():
+            versions[name].append(ident.core.S)
         starts.append(median)
-        measured, ideal = single_track(P, X, X_WC), single_track(white, X, X_WC)
+        measured = single_track(identifiers["measured"], X_WC)
+        ideal = single_track(identifiers["white noise"], X_WC)
         rows_out.append({
             "track": f"{key[0]}.{key[1]}", "samples": len(rows), "t": [rows[0][0], rows[-1][0]],
             "p_T_mm": (1e3 * p_T).round(1).tolist(),

@@ -93,9 +93,12 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     ``hand_eye.refine_points``, the ``FeatureRefiner``'s), the joint positions
     (``HandEyeLoop.actuator_inputs``), the candidates' ``X_WH``, and the uses of
     ``HandEyeLoop.motion_confirm()`` and ``state_machine.pause``. Raises ValueError on bad settings."""
-    if hand_eye.identifying_motion_interval > 0 and joint_ranges is None:
-        raise ValueError("hand_eye.identifying_motion_interval needs the babbling's joint_ranges "
-                         "(the postures it may ask for)")  # fmt: skip
+    if hand_eye.identifying_motion_interval > 0:
+        if joint_ranges is None:
+            raise ValueError("hand_eye.identifying_motion_interval needs the babbling's joint_ranges "
+                             "(the postures it may ask for)")  # fmt: skip
+        if len(joint_ranges) != num_joints:
+            raise ValueError(f"joint_ranges has {len(joint_ranges)} rows for num_joints = {num_joints}")
     criteria, rule = hand_eye.coordination.criteria(), hand_eye.coordination.rule()
     candidate_params = hand_eye.candidates.params()
     coincidence_params = perception.coincidence_params()

@@ -179,6 +179,8 @@ def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
     babbling = HandEyeConfig(identifying_motion_interval=2.0)  # far postures: within which ranges?
     with pytest.raises(ValueError, match="identifying_motion_interval needs the babbling's joint_ranges"):
         make_sustainable_coordination(info, 6, hand_eye=babbling)
+    with pytest.raises(ValueError, match="joint_ranges has 5 rows for num_joints = 6"):
+        make_sustainable_coordination(info, 6, hand_eye=babbling, joint_ranges=[[-1.0, 1.0]] * 5)
     with_motion = make_sustainable_coordination(info, 6, hand_eye=babbling, joint_ranges=[[-1.0, 1.0]] * 6)
     assert with_motion.GetOutputPort("motion_confirm").size() == 2 + 6
     assert with_motion.GetSubsystemByName("identifying_motion") is not None

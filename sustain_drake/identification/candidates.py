@@ -176,7 +176,9 @@ class CandidateParams:
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
                 and self.max_archived >= 0 and self.max_observers >= 0 and self.blind_min_samples >= 0
                 and self.verified_overlap >= 0):
-            raise ValueError(f"observe_min_samples and primary_failures must be >= 1 ({self})")
+            raise ValueError("observe_min_samples, primary_failures and joint_min_samples must be >= 1; "
+                             "max_archived, max_observers, blind_min_samples and verified_overlap "
+                             f">= 0 ({self})")
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
         if not self.observe_radius > 0:
@@ -637,18 +639,21 @@ def stitch(statistics: list, R_WC: np.ndarray, p_WC: np.ndarray, radius: float,
     return [(group[0], group[1]) for group in groups]
 
 
-def _weight(statistic: np.ndarray) -> float:
-    """The (forgetting-weighted) number of samples of an identifier's state vector."""
+def _core(statistic: np.ndarray):
+    """The identifier core holding an identifier's state vector (its ``S``, weight and count)."""
     identifier = EyeToHandIdentifier()
     identifier.set_state(statistic)
-    return identifier.core.weight
+    return identifier.core
+
+
+def _weight(statistic: np.ndarray) -> float:
+    """The (forgetting-weighted) number of samples of an identifier's state vector."""
+    return _core(statistic).weight
 
 
 def _S(statistic: np.ndarray) -> np.ndarray:
     """``S = sum A_t^T A_t`` (16 x 16) from an identifier's state vector."""
-    identifier = EyeToHandIdentifier()
-    identifier.set_state(statistic)
-    return identifier.core.S
+    return _core(statistic).S
 
 
 def _confirmed(c: Candidate, kept, params: CandidateParams, row, usable, frame) -> bool:

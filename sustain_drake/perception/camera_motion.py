@@ -50,9 +50,11 @@ camera by about ``z d``; a camera translation ``t`` moves a point at depth ``z``
 px. Either way a move of ``D`` px displaces the points at depth ``z`` by about ``z D / f`` in the
 camera frame. The observation rule tolerates a per-sample residual of ``sqrt(sigma)`` (the
 allowable error), so a move matters for a calibration used at depths up to ``z_max`` when
-``z_max D / f >= sqrt(sigma)``, i.e. ``D >= f sqrt(sigma) / z_max``. ``diagrams/hand_eye.yaml``:
-``f`` = 290 px (320 x 240, 45 deg vertical field of view), ``sqrt(sigma)`` = 13 mm (100 (1.3 mm)^2),
-tool at 0.6-0.9 m: 4.2 px at 0.9 m, so ``move_px`` = 3 px counts every move the rule could see.
+``z_max D / f >= sqrt(sigma)``, i.e. ``D >= f sqrt(sigma) / z_max``. The defaults are for
+320 x 240 (``f`` = 290 px, 45 deg vertical field of view), ``sqrt(sigma)`` = 13 mm (100 (1.3 mm)^2)
+and the tool at 0.6-0.9 m: 4.2 px at 0.9 m, so ``move_px`` = 3 px counts every move the rule could
+see. Every threshold here is in pixels: at another image size scale them with the focal length
+(``diagrams/hand_eye.yaml``, 640 x 480: ``f`` = 580 px, each doubled).
 """
 
 from __future__ import annotations

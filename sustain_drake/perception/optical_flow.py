@@ -324,7 +324,7 @@ def _lk(prev_gray: np.ndarray, next_gray: np.ndarray, pts: np.ndarray, params: T
     return out.reshape(-1, 2), status.reshape(-1).astype(bool)
 
 
-def _patches(gray: np.ndarray, p_px: np.ndarray, size: int) -> np.ndarray:
+def sample_patches(gray: np.ndarray, p_px: np.ndarray, size: int) -> np.ndarray:
     """K x size x size float32 patches of ``gray`` centred on ``p_px`` (bilinear, borders
     replicated), sampled by one ``cv2.remap`` call for all features."""
     k = p_px.shape[0]
@@ -362,8 +362,8 @@ def identity_kept(prev_gray: np.ndarray, gray: np.ndarray, p0: np.ndarray, p1: n
     if p0.shape[0] == 0:
         return keep
     if params.ncc_min > 0:
-        ncc = patch_ncc(_patches(prev_gray, p0, params.ncc_patch_px),
-                        _patches(gray, p1, params.ncc_patch_px), params.ncc_flat)
+        ncc = patch_ncc(sample_patches(prev_gray, p0, params.ncc_patch_px),
+                        sample_patches(gray, p1, params.ncc_patch_px), params.ncc_flat)
         keep &= ncc >= params.ncc_min
     with np.errstate(invalid="ignore"):
         keep &= ~(np.abs(z1 - z0) > params.depth_jump_m)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from sustain_drake.perception.optical_flow import PinholeIntrinsics, pinhole_points, to_gray
+from sustain_drake.perception.optical_flow import PinholeIntrinsics, pinhole_points, sample_patches, to_gray
 
 
 @dataclass(frozen=True)
@@ -125,23 +125,24 @@ def refine_pixels(gray: np.ndarray, p_px: np.ndarray, params: RefinementParams):
 
 def central_symmetry(gray: np.ndarray, p_px: np.ndarray, half: int) -> np.ndarray:
     """How centrally symmetric the image is about each sub-pixel point (K,): the normalised
-    correlation of the ``(2 half + 1)^2`` window centred on the point (bilinear, ``cv2.getRectSubPix``)
-    with the same window turned by 180 deg, both less the window's mean. 1 for a checker saddle or a
-    round mark's centre, about -1 on a straight edge, in between for an L corner; -1 for a window
-    that leaves the image or has no texture."""
+    correlation of the ``(2 half + 1)^2`` window centred on the point (bilinear,
+    ``optical_flow.sample_patches``) with the same window turned by 180 deg, both less the window's
+    mean. 1 for a checker saddle or a round mark's centre, about -1 on a straight edge, in between
+    for an L corner; -1 for a window that leaves the image or has no texture."""
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
-    g = np.asarray(gray, dtype=np.float32)
     side = 2 * half + 1
     out = np.full(p.shape[0], -1.0)
-    h, w = g.shape
-    for k, (u, v) in enumerate(p):
-        if not (half <= u <= w - 1 - half and half <= v <= h - 1 - half):
-            continue
-        window = cv2.getRectSubPix(g, (side, side), (float(u), float(v))).astype(float)
-        window -= window.mean()
-        energy = float((window * window).sum())
-        if energy > 1e-6 * side * side:
-            out[k] = float((window * window[::-1, ::-1]).sum()) / energy
+    h, w = np.shape(gray)
+    inside = np.flatnonzero(np.isfinite(p).all(axis=1) & (p[:, 0] >= half) & (p[:, 0] <= w - 1 - half)
+                            & (p[:, 1] >= half) & (p[:, 1] <= h - 1 - half))
+    if inside.size == 0:
+        return out
+    windows = sample_patches(np.asarray(gray, np.float32), p[inside], side).astype(float)
+    windows -= windows.mean(axis=(1, 2), keepdims=True)
+    energy = np.einsum("kij,kij->k", windows, windows)
+    turned = np.einsum("kij,kij->k", windows, windows[:, ::-1, ::-1])
+    textured = energy > 1e-6 * side * side
+    out[inside[textured]] = turned[textured] / energy[textured]
     return out
 
 
