@@ -54,7 +54,8 @@ class HandEyeLoop:
 
     def image_inputs(self, name: str) -> list:
         """The input ports that take the camera's ``name`` (color_image, depth_image, image_time)."""
-        return [s.GetInputPort(name) for s in (self.tracker, self.refiner) if s is not None]
+        systems = (self.tracker, self.refiner, self.candidates)  # the candidates' with the depth check
+        return [s.GetInputPort(name) for s in systems if s is not None and s.HasInputPort(name)]
 
     def actuator_inputs(self) -> list:
         """The input ports that take the joint positions (the detector's, the camera-motion
@@ -89,8 +90,9 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     ``camera_motion``; with ``hand_eye.identifying_motion_interval`` > 0, an ``IdentifyingMotion``
     (far postures within ``joint_ranges``, n x [lower, upper] rad, drawn from ``motion_seed``)
     forwards the detector's confirming requests and adds its own while identifying. Left for the
-    caller: the images (``HandEyeLoop.image_inputs``: the tracker's and, with
-    ``hand_eye.refine_points``, the ``FeatureRefiner``'s), the joint positions
+    caller: the images (``HandEyeLoop.image_inputs``: the tracker's, with
+    ``hand_eye.refine_points`` the ``FeatureRefiner``'s, with ``free_space_radius`` the candidates'
+    depth), the joint positions
     (``HandEyeLoop.actuator_inputs``), the candidates' ``X_WH``, and the uses of
     ``HandEyeLoop.motion_confirm()`` and ``state_machine.pause``. Raises ValueError on bad settings."""
     if hand_eye.identifying_motion_interval > 0:
@@ -114,7 +116,8 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         params=coincidence_params, feature_params=feature_params))  # fmt: skip
     detector.set_name("motion_coincidence_detector")
     formulation = EyeToHandFormulation(criteria, hand_eye.coordination.forgetting_factor)
-    candidates = builder.AddSystem(CandidateIdentifiers(formulation, candidate_params, period))
+    depth_check = info if candidate_params.free_space_radius > 0 else None
+    candidates = builder.AddSystem(CandidateIdentifiers(formulation, candidate_params, period, depth_check))
     candidates.set_name("candidate_identifiers")
     machine = builder.AddSystem(CoordinationStateMachine(16, rule, period))
     machine.set_name("coordination_state_machine")

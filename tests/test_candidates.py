@@ -29,10 +29,9 @@ def hand_pose(k):
     return X
 
 
-def seen(X_WH, p_HP, rng, noise=0.5e-3):
+def seen(X_WH, p_HP, rng, noise=0.5e-3, X_WC=TRUTH.X_WC):
     """The point p_HP of the hand, in the (true) camera frame, with noise."""
     p_W = X_WH[:3, :3] @ p_HP + X_WH[:3, 3]
-    X_WC = TRUTH.X_WC
     return X_WC[:3, :3].T @ (p_W - X_WC[:3, 3]) + rng.normal(0, noise, 3)
 
 
@@ -516,11 +515,12 @@ def test_stitching_tracks_of_one_point_pins_the_camera_and_keeps_other_marks_apa
         CandidateParams(stitch_radius=-1.0)
 
 
-def _slip_with_every_track_lost(params, slip):
+def _slip_with_every_track_lost(params, slip, depth=False):
     """9 (the tool point, leader) and 4, 5 (more tool points) are observed under the true model;
     at frame 300 the tool slips by ``slip`` (in H) and every track ends at once (the tracker lost
-    them in the jump); from then on new tracks (ids + 100) of the same three marks. Returns
-    ``{frame: (sample_count, sample_error)}`` and the final bank."""
+    them in the jump); from then on new tracks (ids + 100) of the same three marks. ``depth``: a
+    depth camera sees the tool as a 3 cm ball around the tool point, a wall 2 m away elsewhere.
+    Returns ``{frame: (sample_count, sample_error)}`` and the final bank."""
     points = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05]}
     x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
     bank, rng, counts = CandidateBank(), np.random.default_rng(3), {}
@@ -529,8 +529,14 @@ def _slip_with_every_track_lost(params, slip):
         after = k >= 300
         ids = [i + 100 * after for i in points]
         p = [seen(X, points[i] + (slip if after else 0.0), rng) for i in points]
+        tool_C = seen(X, P_TOOL + (slip if after else 0.0), rng, noise=0.0)
+
+        def depth_gap(p_CP, tool_C=tool_C):
+            return 0.0 if np.linalg.norm(p_CP - tool_C) < 0.03 else 2.0 - p_CP[2]
+
         bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
-                               np.ones(3, bool), np.ones(3, bool), x_true, allowable_error=1e-4)
+                               np.ones(3, bool), np.ones(3, bool), x_true, allowable_error=1e-4,
+                               depth_gap=depth_gap if depth else None)
         counts[k] = (bank.sample_count, bank.sample_error)
     return counts, bank
 
@@ -562,6 +568,77 @@ def test_a_point_first_tracked_while_blind_does_not_take_over_the_observation_an
     counts, bank = _slip_with_every_track_lost(new, np.zeros(3))  # no slip: re-acquired at once
     assert counts[479][0] - counts[301][0] == 178 and max(counts[k][1] for k in range(301, 480)) < 2e-5
     assert bank.observed == 109
+
+
+@pytest.mark.parametrize("slip", [[0.0, 0.05, 0.04], [0.0, 0.0, 0.0]])
+def test_the_depth_behind_the_adopted_tool_point_tells_a_slip_no_track_shows(slip):
+    """``free_space_radius``: after a slip that ended every observed track, the new tracks fit
+    the kept camera with their own ``p_HP`` and hide the slip (the hand-over above), but the depth
+    camera sees through where the model puts the tool point: every frame is a violation, the
+    blind ones included. Without a slip the depth check joins each sample and changes nothing."""
+    params = replace(HANDOVER, max_observers=2, free_space_radius=0.005)
+    counts, bank = _slip_with_every_track_lost(params, np.array(slip), depth=True)
+    if any(slip):
+        # One sample per frame from the slip on, each the wall's distance behind the tool point.
+        assert all(counts[k][0] == counts[k - 1][0] + 1 for k in range(300, 480))
+        assert min(counts[k][1] for k in range(300, 480)) > 1.0  # m^2: the wall ~1.3 m behind
+    else:
+        assert all(counts[k][0] == counts[k - 1][0] + 1 for k in range(200, 480))
+        assert max(counts[k][1] for k in range(200, 480)) < 2e-5
+    if not any(slip):
+        return
+    # Without the depth image the same run has blind frames and hides the slip.
+    counts, _ = _slip_with_every_track_lost(params, np.array(slip))
+    assert any(counts[k][0] == counts[k - 1][0] for k in range(301, 480))
+    resumed = [k for k in range(301, 480) if counts[k][0] > counts[k - 1][0]]
+    assert resumed and max(counts[k][1] for k in resumed) < 2e-5
+
+
+def test_after_a_camera_move_the_tool_points_are_kept_and_only_the_camera_is_new():
+    """``keep_tool_points``: five tool points observed under the true model; at frame 400 the camera
+    turns by 9 degrees and moves 5 cm, and the state machine resets with the model cleared. The tracks
+    that outlive the move keep their ``p_HP``, and once they have ``observe_min_samples`` samples
+    the camera is solved from them alone (closed form), well before an identification of all 16
+    unknowns; one track that slid onto another point since (a wrong ``p_HP``) stops it."""
+    points = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05],
+              6: P_TOOL + [0.02, 0.05, 0.02], 8: P_TOOL + [-0.01, -0.04, 0.06]}
+    moved = TRUTH.X_WC.copy()
+    moved[:3, :3] = Rotation.from_rotvec([0.0, 0.1, 0.12]).as_matrix() @ moved[:3, :3]
+    moved[:3, 3] += [0.05, 0.0, -0.02]
+
+    def run_move(params, slid=None):
+        bank, rng = CandidateBank(), np.random.default_rng(3)
+        for k in range(700):
+            X = hand_pose(k)
+            after = k >= 400
+            X_WC = moved if after else TRUTH.X_WC
+            p = [seen(X, points[i] + (0.02 if after and i == slid else 0.0), rng, X_WC=X_WC) for i in points]
+            # The state machine's adopted model: the leader's point under the true camera; cleared
+            # at the move.
+            adopted = (None if after or bank.leader < 0
+                       else pack_x(X_WC[:3, :3], X_WC[:3, 3], points[bank.leader]))
+            bank = candidates.step(bank, params, CRITERIA, k * DT, float(after), X, k * DT,
+                                   np.array(list(points)), np.array(p), np.ones(5, bool), np.ones(5, bool),
+                                   adopted, allowable_error=1e-4)
+            if after and bank.leader >= 0:
+                return bank, k
+        return bank, None
+
+    params = replace(HANDOVER, max_observers=3, keep_tool_points=True)
+    bank, k = run_move(params)
+    assert k == 400 + params.observe_min_samples - 1  # the 50th sample since the move
+    adoption = bank.adoptions[-1]
+    assert adoption.kind == "previous tool points"
+    estimate = adoption.estimate
+    assert np.linalg.norm(estimate.p_WC - moved[:3, 3]) < 1e-3
+    assert rotation_error_deg(estimate.R_WC, moved[:3, :3]) < 0.2  # the targets: 2 mm, 0.2 deg
+    assert np.linalg.norm(estimate.x[12:15] - points[adoption.feature_id]) < 2e-3
+    # Without the key the identification of all 16 unknowns comes later (the paper's).
+    bank, k_paper = run_move(replace(params, keep_tool_points=False))
+    assert bank.adoptions[-1].kind.startswith("identified") and k_paper > k + 20
+    # A track that slid 2 cm (on the tool, not the point it was) spoils the camera: not adopted.
+    bank, k_slid = run_move(params, slid=4)
+    assert k_slid is None or bank.adoptions[-1].kind != "previous tool points"
 
 
 @pytest.mark.parametrize("keep", [False, True])

@@ -1,6 +1,7 @@
 """Eye-to-hand formulation (§3.4) with the §3.2 projection, conditioning and refinement."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,7 +17,13 @@ from sustain_drake.identification import (
     calibrate_eye_to_hand,
 )
 from sustain_drake.identification.candidates import best_p_HP_given_camera
-from sustain_drake.identification.eye_to_hand import build_A, conditioning_transform, pack_x, refine_joint
+from sustain_drake.identification.eye_to_hand import (
+    build_A,
+    camera_given_points,
+    conditioning_transform,
+    pack_x,
+    refine_joint,
+)
 from sustain_drake.identification.rotation import project_to_rotation
 
 
@@ -244,3 +251,44 @@ def test_joint_refinement_equals_least_squares_over_every_points_samples():
     joint_error = rotation_error_deg(R, truth.X_WC[:3, :3])
     assert joint_error < min(rotation_error_deg(e.R_WC, truth.X_WC[:3, :3]) for e in singles)
     assert refine_joint([np.zeros((16, 16))] * 2, first.R_WC, first.p_WC, np.zeros((2, 3))) is None
+
+
+def test_camera_given_points_equals_least_squares_with_the_points_fixed():
+    """``camera_given_points``: with ``p_HP`` known, the camera from the statistics alone (closed
+    form) is the optimum of a least-squares solver over the samples with only the camera free;
+    pure translation of the hand is no obstacle (unlike the 16-unknown problem), a single point
+    suffices, and points on a line have no spread."""
+    truth = make_truth(31)
+    points = [truth.p_HP, truth.p_HP + [0.05, -0.03, 0.1]]
+    data, S_list = [], []
+    for k, p_HP in enumerate(points):
+        p_C, X_WH = make_samples(replace(truth, p_HP=p_HP), 120, noise_m=1e-3, seed=32 + k, rotate=False)
+        identifier = EyeToHandIdentifier()
+        for c, X in zip(p_C, X_WH, strict=True):
+            identifier.add_pose(c, X)
+        S_list.append(identifier.core.S)
+        data.append((p_C, X_WH, p_HP))
+
+    def residuals(theta):
+        R = Rotation.from_rotvec(theta[:3]).as_matrix()
+        return np.concatenate([(p_C @ R.T + theta[3:6] - np.einsum("nij,j->ni", X_WH[:, :3, :3], p_HP)
+                                - X_WH[:, :3, 3]).ravel() for p_C, X_WH, p_HP in data])
+
+    start = np.concatenate([Rotation.from_matrix(truth.X_WC[:3, :3]).as_rotvec(), truth.X_WC[:3, 3]])
+    ls = least_squares(residuals, start, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    R, p_WC, spread = camera_given_points(S_list, np.array(points))
+    assert rotation_error_deg(R, Rotation.from_rotvec(ls.x[:3]).as_matrix()) < 1e-6
+    assert np.abs(p_WC - ls.x[3:6]).max() < 1e-8
+    assert rotation_error_deg(R, truth.X_WC[:3, :3]) < 0.05
+    assert np.linalg.norm(p_WC - truth.X_WC[:3, 3]) < 1e-3
+    assert 0.1 < spread < 0.4  # the 0.6 m cube's points, off any line
+    R1, _, _ = camera_given_points(S_list[:1], np.array(points[:1]))  # one point is enough
+    assert rotation_error_deg(R1, truth.X_WC[:3, :3]) < 0.1
+    # The hand moving along a line: a turn about it is free, and the spread says so.
+    X_line = np.tile(np.eye(4), (50, 1, 1))
+    X_line[:, :3, 3] = np.linspace(0.0, 0.3, 50)[:, None] * [1.0, 0.5, 0.2] + [0.4, 0.0, 0.3]
+    identifier = EyeToHandIdentifier()
+    for X in X_line:
+        identifier.add_pose((X[:3, 3] + truth.p_HP - truth.X_WC[:3, 3]) @ truth.X_WC[:3, :3], X)
+    assert camera_given_points([identifier.core.S], truth.p_HP[None])[2] < 1e-6
+    assert camera_given_points([np.zeros((16, 16))], truth.p_HP[None]) is None

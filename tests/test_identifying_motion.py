@@ -63,3 +63,37 @@ def test_far_postures_while_identifying_and_the_detector_first():
 def test_nothing_of_its_own_while_observing():
     out = simulate(t_observe=0.0, t_request=np.inf, until=3.0)
     assert out[:, 0].max() == 0
+
+
+def test_a_far_posture_at_least_every_max_hold_however_often_the_detector_asks():
+    """The detector asking every 0.5 s (its confirming trials one after the other): while
+    identifying, a far posture every ``max_hold`` (3 intervals) all the same, and the detector's
+    requests wait one interval after it (the arm on its way there), then go on."""
+    builder = DiagramBuilder()
+    scripted = builder.AddSystem(Scripted(t_observe=np.inf, t_request=np.inf))
+    detector = builder.AddSystem(Chatty())
+    motion = builder.AddSystem(IdentifyingMotion(RANGES, interval=1.0, seed=3, period=0.1))
+    q = builder.AddSystem(ConstantVectorSource(Q))
+    builder.Connect(scripted.GetOutputPort("mode"), motion.GetInputPort("mode"))
+    builder.Connect(detector.get_output_port(), motion.GetInputPort("detector_confirm"))
+    builder.Connect(q.get_output_port(), motion.GetInputPort("joint_positions"))
+    simulator = Simulator(builder.Build())
+    joints = []
+    for t in np.arange(0.1, 10.0 + 1e-9, 0.1):
+        simulator.AdvanceTo(t)
+        out = motion.GetOutputPort("confirm").Eval(motion.GetMyContextFromRoot(simulator.get_context()))
+        joints.append((round(t, 1), out[0], out[1]))
+    new = [(t, j) for (t, i, j), prev in zip(joints[1:], joints[:-1], strict=True) if i != prev[1]]
+    own, forwarded = [t for t, j in new if j == -1.0], [t for t, j in new if j == 2.0]
+    assert own == pytest.approx([3.0, 6.0, 9.0], abs=0.15)
+    assert forwarded and all(not (o <= f < o + 1.0) for o in own for f in forwarded)
+    assert len(forwarded) >= 8  # the detector is still served most of the time
+
+
+class Chatty(LeafSystem):
+    """A detector with a new confirming request (joint 2) every 0.5 s."""
+
+    def __init__(self):
+        super().__init__()
+        self.DeclareVectorOutputPort("confirm", 7, lambda c, o: o.SetFromVector(
+            [1.0 + np.floor(c.get_time() / 0.5), 2.0, *Q]))  # fmt: skip

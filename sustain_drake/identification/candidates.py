@@ -36,6 +36,7 @@ system in an abstract state):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -45,6 +46,7 @@ from sustain_drake.identification.eye_to_hand import (
     EyeToHandIdentifier,
     EyeToHandSolution,
     build_A,
+    camera_given_points,
     pack_x,
     refine_joint,
 )
@@ -142,6 +144,28 @@ class CandidateParams:
             sample over the allowable error (``s_t`` = inf): the tool point the model holds can no
             longer be checked, as after a slip that ended every observed track; the paper's
             consecutive-violation count then decides (False: such frames give no sample).
+        free_space_radius: m; > 0: every frame, the adopted tool point is also checked against the
+            depth image (``step``'s ``depth_gap``, e.g. ``perception.free_space.depth_gap`` with
+            this radius): where the model puts it, the camera must not see a surface behind it.
+            ``s_t = max(gap, 0)^2`` (a lower bound of the point's error along the ray) joins the
+            frame's sample (the larger one), or is the frame's sample when no point observes.
+            Beyond the paper: a slip ends the observed point's track in the slip itself, and the
+            points tracked after it fit the kept camera with their own ``p_HP``, so no tracked
+            point shows the slip; the depth still shows that the tool left the place the model
+            puts it (0: off; the system needs the depth image).
+        keep_tool_points: after a reset that cleared the model (the state machine does so when the
+            camera moved), the points the abandoned model observed (the observed point, its witness,
+            the observers, each with its ``p_HP``) keep their ``p_HP``: a moved camera leaves the
+            held tool as it was. Their tracks that outlive the move give, once each has
+            ``observe_min_samples`` samples, the new camera in closed form (``camera_given_points``:
+            6 unknowns, not 15); it leads when every such point fits it within
+            ``observe_consistency`` of the adopted RMS error and their camera-frame points spread
+            at least ``min_point_spread`` off a line. Beyond the paper, which identifies
+            everything again (False: the paper's).
+        min_point_spread: m, how far the known points' samples must lie from a line in the camera
+            frame (their RMS distance from their principal line, ``keep_tool_points``): the rotation
+            is pinned to about the noise over the spread times the root of the number of samples
+            (0.5 mm, 3 cm and 300 samples: 0.06 degree).
     """
 
     max_candidates: int = 8
@@ -171,6 +195,9 @@ class CandidateParams:
     verified_overlap: int = 0
     unverified_evidence: bool = False
     keep_allowable_error: bool = False
+    free_space_radius: float = 0.0
+    keep_tool_points: bool = False
+    min_point_spread: float = 0.03
 
     def __post_init__(self):
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
@@ -185,11 +212,13 @@ class CandidateParams:
             raise ValueError(f"observe_radius must be positive, got {self.observe_radius}")
         if not (self.stitch_radius >= 0 and math.isfinite(self.stitch_radius)):
             raise ValueError(f"stitch_radius must be >= 0, got {self.stitch_radius}")
-        if not (self.refine_interval >= 0 and math.isfinite(self.refine_interval)):
-            raise ValueError(f"refine_interval must be >= 0, got {self.refine_interval}")
+        for name in ("refine_interval", "free_space_radius"):
+            value = getattr(self, name)
+            if not (value >= 0 and math.isfinite(value)):
+                raise ValueError(f"{name} must be >= 0, got {value}")
         for name in ("max_hand_radius", "gate_margin", "max_lost_time", "max_unconverged_time",
                      "reacquire_radius", "pose_tolerance", "reject_rms", "observation_jump",
-                     "min_rotation_spread"):
+                     "min_rotation_spread", "min_point_spread"):
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a positive number, got {value}")
@@ -271,6 +300,8 @@ class CandidateBank:
     sample_errors: tuple = ()  # this frame's s_t of the observed point and its witness (m^2)
     last_refinement: float = -math.inf  # s
     tool_observed: bool = False  # a tool point gave this frame's observation sample
+    model_x: np.ndarray | None = None  # the adopted estimate while there is a leader (Eq. (36))
+    known_points: tuple = ()  # after a camera move: (feature_id, p_HP) the abandoned model observed
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -350,6 +381,7 @@ def step(
     forgetting_factor: float = 1.0,
     in_body_cell: np.ndarray | None = None,
     allowable_error: float = math.inf,
+    depth_gap: Callable[[np.ndarray], float] | None = None,
 ) -> CandidateBank:
     """One tick at ``time``: the reset, the hand pose, then (on a new frame) admission, feeding,
     loss, the leader and the observation. Returns the new bank.
@@ -366,15 +398,24 @@ def step(
             observed point from a change of the body (inf: never).
         reference_x: the adopted estimate (Eq. (36)); zeros or None before one. ``s_t`` of the
             observed feature is computed under it (under the leader's own estimate if unset).
+        depth_gap: this frame's depth check (``free_space_radius``): for a point in the camera
+            frame, how far behind it the camera sees a surface, m (NaN: cannot tell). None: no
+            depth image for this frame.
     """
     if reset != bank.last_reset:
         previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) else None
+        known = () if previous is not None else bank.known_points
+        if previous is None and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
+            known = _observed_points(bank)  # the model cleared: the camera moved, the tool did not
         bank = replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
+                       known_points=known, model_x=None,
                        last_reset=float(reset), round_start=math.nan,
                        observed_last=None, observed_p_HP=None,
                        witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
                        observers=(), refined_solution=None, last_refinement=-math.inf)
     bank = record_pose(bank, time, X_WH)
+    if bank.leader >= 0 and x_is_set(reference_x):
+        bank = replace(bank, model_x=np.array(reference_x, dtype=float))
     if not frame_time > bank.last_frame:
         return bank  # no new frame (or none yet)
     X_frame = pose_at(bank, frame_time, params.pose_tolerance)
@@ -436,7 +477,7 @@ def step(
         # Confirmed body features first, then features in body cells; oldest track first. While
         # observing (with observers), alternately the nearest to where the adopted model puts the
         # tool point (the tool's points) and the oldest (long tracks: often the hand's own).
-        order = np.lexsort((ids, ~on_body))
+        order = np.lexsort((ids, ~on_body, ~np.isin(ids, [i for i, _ in bank.known_points])))
         if observing:
             tool_point = predicted_p_CP(np.asarray(reference_x), X_frame)
             nearest = np.argsort(np.linalg.norm(p_CP - tool_point, axis=1))
@@ -485,6 +526,19 @@ def step(
                 adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
                                                   best.admitted, round_start, best.solution.estimate,
                                                   "previous camera"),)
+    elif leader < 0 and bank.known_points:
+        # A moved camera: the points the abandoned model observed kept their p_HP.
+        found = _camera_from_known_points(kept, dict(bank.known_points), params, bank.adopted_mse)
+        if found is not None:
+            x, mse, leader = found
+            best = next(c for c in kept if c.feature_id == leader)
+            expected = min(mse, bank.adopted_mse) if params.keep_allowable_error else mse
+            best = _with_camera(best, x, x[12:15].copy(), expected,
+                                "converged: the tool points kept, the camera re-identified")
+            kept = [best if c.feature_id == leader else c for c in kept]
+            adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
+                                              best.admitted, round_start, best.solution.estimate,
+                                              "previous tool points"),)
     # Before a leader, a frame that fed any identifier counts as a sample (the state machine
     # checks a solution's samples against the count since a reset); after, observations count.
     count = bank.sample_count + (1 if fed and bank.leader < 0 else 0)
@@ -505,7 +559,7 @@ def step(
           and frame_time - bank.last_refinement >= params.refine_interval):
         bank = _refine_adopted(bank, params, reference_x, float(frame_time))
     return _observe(bank, params, frame_time, X_frame, ids, p_CP, usable, on_body | in_body_cell, row,
-                    reference_x, allowable_error)
+                    reference_x, allowable_error, depth_gap)
 
 
 def _explained(c: Candidate, x, adopted_mse: float, params: CandidateParams) -> bool:
@@ -666,13 +720,54 @@ def _confirmed(c: Candidate, kept, params: CandidateParams, row, usable, frame) 
     return bool(_consistent(probe, params, row, usable, c.solution.x, frame, exclude=(c.feature_id,)))
 
 
-def _with_camera(c: Candidate, x_previous: np.ndarray, p_HP: np.ndarray, mse: float) -> Candidate:
-    """The candidate with the solution "the previous camera and this p_HP", converged."""
+def _with_camera(c: Candidate, x_previous: np.ndarray, p_HP: np.ndarray, mse: float,
+                 verdict: str = "converged: the previous camera explains the samples, p_HP re-identified",
+                 ) -> Candidate:  # fmt: skip
+    """The candidate with the converged solution "the camera of ``x_previous`` and this p_HP"."""
     R_WC, p_WC = x_previous[0:9].reshape(3, 3, order="F"), x_previous[9:12]
     estimate = EyeToHandEstimate(R_WC, p_WC.copy(), p_HP, pack_x(R_WC, p_WC, p_HP), mse)
-    verdict = Verdict(True, "converged: the previous camera explains the samples, p_HP re-identified")
+    verdict = Verdict(True, verdict)
     solution = replace(c.solution, projected=estimate, refined=estimate, expected_mse=mse, verdict=verdict)
     return replace(c, solution=solution)
+
+
+def _observed_points(bank: CandidateBank) -> tuple:
+    """``(feature_id, p_HP)`` of every point observing the adopted model (``keep_tool_points``):
+    the leader and the observed point (the adopted tool point unless handed over), the witness,
+    the observers."""
+    anchor = bank.model_x[12:15].copy()
+    points = [(bank.leader, anchor),
+              (bank.observed, anchor if bank.observed_p_HP is None else bank.observed_p_HP),
+              (bank.witness, bank.witness_p_HP)] + [(o[0], o[1]) for o in bank.observers]
+    known = {}
+    for feature_id, p_HP in points:
+        if feature_id >= 0 and p_HP is not None and feature_id not in known:
+            known[feature_id] = np.array(p_HP, dtype=float)
+    return tuple(known.items())
+
+
+def _camera_from_known_points(kept, known: dict, params: CandidateParams, adopted_mse: float):
+    """``keep_tool_points``: the camera that the known points' samples since the reset give
+    (``camera_given_points``), if every one of them (with ``observe_min_samples`` samples) fits it
+    within ``observe_consistency`` of the adopted RMS error and they spread ``min_point_spread``
+    off a line.
+    Returns ``(x, mse, feature_id)`` (the estimate with the tool point of the point with the most
+    samples, its mean squared error, that point) or None."""
+    ready = [c for c in kept
+             if c.feature_id in known and c.solution.num_samples >= params.observe_min_samples]
+    if not ready:
+        return None
+    statistics = [_S(c.statistic) for c in ready]
+    found = camera_given_points(statistics, np.array([known[c.feature_id] for c in ready]))
+    if found is None or not found[2] >= params.min_point_spread:
+        return None
+    R_WC, p_WC, _ = found
+    limit = params.observe_consistency**2 * adopted_mse
+    errors = [mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, known[c.feature_id])) for c in ready]
+    if not max(errors) <= limit:
+        return None  # a point that no longer fits: the tool moved too, or a track slid
+    k = max(range(len(ready)), key=lambda i: ready[i].solution.num_samples)
+    return pack_x(R_WC, p_WC, known[ready[k].feature_id]), errors[k], ready[k].feature_id
 
 
 def _admit(feature_id, criteria, time, p_CP, X_WH) -> Candidate:
@@ -705,7 +800,7 @@ def _feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, r
 
 
 def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
-             allowable_error=math.inf) -> CandidateBank:
+             allowable_error=math.inf, depth_gap=None) -> CandidateBank:
     """``_observe_primary`` (the observed point and its witness), then the extra observers
     (``params.max_observers``, the points nearest the adopted tool point first): every consistent
     point tracked now gives its own ``s_t`` under the adopted camera with its own ``p_HP``. The
@@ -718,10 +813,13 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
 
     A frame whose sample includes a tool point within the allowable error *verifies* the model:
     every candidate's samples so far count as taken under a verified model (``verified_overlap``).
-    A frame with no sample may count as a violation (``unverified_evidence``)."""
+    A frame with no sample may count as a violation (``unverified_evidence``). The adopted tool
+    point's depth check (``free_space_radius``) joins the frame's sample."""
     before = bank.sample_count
     bank = _observe_points(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,
                            allowable_error)  # fmt: skip
+    if params.free_space_radius > 0 and depth_gap is not None:
+        bank = _free_space_sample(bank, reference_x, X_WH, depth_gap, before)
     if bank.leader < 0 or bank.sample_count > before:
         if bank.leader >= 0 and bank.tool_observed and bank.sample_error <= allowable_error:
             bank = _verified(bank)  # a tool point the model holds was seen where the model puts it
@@ -731,6 +829,21 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
                                                                           (p_CP, X_WH)):
         return replace(bank, sample_count=before + 1, sample_error=math.inf, sample_errors=())
     return bank
+
+
+def _free_space_sample(bank, reference_x, X_WH, depth_gap, before: int) -> CandidateBank:
+    """``free_space_radius``: the depth behind the adopted tool point gives ``s_t =
+    max(gap, 0)^2``, the larger with the points' sample of this frame, or this frame's only one."""
+    x = _model_in_use(bank, reference_x)
+    if x is None:
+        return bank
+    gap = depth_gap(predicted_p_CP(x, X_WH))
+    if math.isnan(gap):
+        return bank  # the tool point out of view: no evidence either way
+    s_t = max(gap, 0.0) ** 2
+    if bank.sample_count > before:
+        return replace(bank, sample_error=max(bank.sample_error, s_t))
+    return replace(bank, sample_count=before + 1, sample_error=s_t, sample_errors=())
 
 
 def _verified(bank: CandidateBank) -> CandidateBank:

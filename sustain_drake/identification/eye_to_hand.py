@@ -381,3 +381,39 @@ def refine_joint(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP
             break
     U, _, Vt = np.linalg.svd(R)
     return U @ Vt, p_WC, p_HP
+
+
+def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):
+    """The camera pose that best explains the samples of K points whose ``p_HP`` is known
+    (``S_k`` the raw 16 x 16 statistic of point k; ``p_HP``: K x 3): Eq. (35)'s least squares with
+    ``p_HP`` fixed, in closed form from the statistics alone. Beyond the paper: a moved camera leaves
+    the held tool as it was, so only the camera (6 unknowns) is new.
+
+    With ``p_HP`` fixed, ``sum_k x_k^T S_k x_k`` is quadratic in ``(vec R_WC, p_WC)``; the
+    minimising ``p_WC`` is affine in ``R_WC``, and the remaining quadratic term in ``R_WC`` is
+    ``tr(C)`` (``C`` the scatter of the camera-frame points), constant on SO(3): what is left is
+    linear in ``R_WC``, an orthogonal Procrustes problem (SVD). Returns ``(R_WC, p_WC, spread)``:
+    ``spread`` (m), the RMS distance of the camera-frame points from their principal line, says how
+    well the samples pin the rotation (a turn about any axis moves the points by at least the angle
+    times it; 0: the points on a line, where the turn about it is free; points in a plane pin it).
+    None for no samples."""
+    p_HP = np.asarray(p_HP, dtype=float).reshape(-1, 3)
+    P = np.zeros((13, 13))  # the statistics in w = [vec R_WC; p_WC; 1] (x = E w)
+    E = np.zeros((N_UNKNOWNS, 13))
+    E[:12, :12] = np.eye(12)
+    E[15, 12] = 1.0
+    for S, p in zip(S_list, p_HP, strict=True):
+        E[12:15, 12] = p
+        P += E.T @ np.asarray(S, dtype=float) @ E
+    n = P[9, 9]  # samples in all
+    if not n > 0:
+        return None
+    # p_WC = -(P_tR vec R + P_t1) / n; the cost's term linear in vec R is then 2 g^T vec R.
+    g = P[0:9, 12] - P[0:9, 9:12] @ P[9:12, 12] / n
+    U, _, Vt = np.linalg.svd(-g.reshape(3, 3, order="F"))
+    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt  # max tr(-G^T R) on SO(3)
+    p_WC = -(P[9:12, 0:9] @ R.reshape(9, order="F") + P[9:12, 12]) / n
+    scatter = P[0:9:3, 0:9:3] - np.outer(P[0:9:3, 9], P[0:9:3, 9]) / n  # n C: P_RR = (sum a a^T) x I
+    smallest = np.linalg.eigvalsh(scatter / n)[:2]  # the scatter off the principal line
+    spread = math.sqrt(max(float(smallest.sum()), 0.0))
+    return R, p_WC, spread

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from functools import partial
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -14,6 +15,7 @@ from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank, CandidateParams
 from sustain_drake.identification.eye_to_hand import N_UNKNOWNS
 from sustain_drake.identification.sustainable_identifier import Verdict
+from sustain_drake.perception.free_space import depth_gap
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.perception.point_refinement import RefinementParams, refine_points
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
@@ -64,8 +66,7 @@ class FeatureRefiner(LeafSystem):
 
     def _calc(self, context, output) -> None:
         features = self._features.Eval(context)
-        same_frame = (not self._time.HasValue(context)
-                      or abs(float(self._time.Eval(context)[0]) - features.time) < 1e-9)
+        same_frame = _same_frame(self._time, context, features.time)
         color, depth = self._color.Eval(context).data, self._depth.Eval(context).data
         shape_ok = color.shape[:2] == (self._intrinsics.height, self._intrinsics.width) == depth.shape[:2]
         if len(features) == 0 or not (same_frame and shape_ok):
@@ -74,6 +75,13 @@ class FeatureRefiner(LeafSystem):
             p_CP, valid, p_px = refine_points(color, depth, features.p_px, self._intrinsics,
                                               self._params, return_pixels=True)
         output.set_value(dataclasses.replace(features, p_px=p_px, p_CP=p_CP, valid=valid))
+
+
+def _same_frame(image_time_port, context, features_time: float) -> bool:
+    """Whether the images on the inputs are the features' frame (True when ``image_time`` is not
+    connected: the caller vouches for it)."""
+    return (not image_time_port.HasValue(context)
+            or abs(float(image_time_port.Eval(context)[0]) - features_time) < 1e-9)
 
 
 class CandidateIdentifiers(LeafSystem):
@@ -90,6 +98,8 @@ class CandidateIdentifiers(LeafSystem):
         - reset (optional)
         - reference_x (optional)
         - allowable_error (optional)
+        - depth_image (with camera_info)
+        - image_time (optional, with camera_info)
         output_ports:
         - eigenvalues
         - x
@@ -110,7 +120,10 @@ class CandidateIdentifiers(LeafSystem):
     ``reset``), ``reference_x`` (16: the adopted estimate, for ``observation``; connect the state
     machine's ``adopted_x``), ``allowable_error`` (1, m^2: the state machine's sigma, so that a
     tracking failure of the observed point, which its witness does not share, is told from a change
-    of the body; unconnected: never).
+    of the body; unconnected: never). With ``camera_info`` (and ``params.free_space_radius`` > 0):
+    ``depth_image`` (``ImageDepth32F``, m) and ``image_time`` (1, s), the features' frame's depth,
+    against which the adopted tool point is checked every frame (``perception.free_space``; an
+    image from another frame than the features', by ``image_time``, is not used).
 
     Outputs, the same as a ``SustainableIdentifierSystem`` with ``EyeToHandFormulation`` so that a
     ``CoordinationStateMachine`` plugs in: the solution-derived ports are those of the *shown*
@@ -124,12 +137,15 @@ class CandidateIdentifiers(LeafSystem):
     """
 
     def __init__(self, formulation: EyeToHandFormulation | None = None, params: CandidateParams | None = None,
-                 period: float = 1.0 / 30.0):  # fmt: skip
+                 period: float = 1.0 / 30.0, camera_info: CameraInfo | None = None):  # fmt: skip
         super().__init__()
         if not period > 0:
             raise ValueError(f"period must be > 0, got {period}")
         self._formulation = formulation or EyeToHandFormulation()
         self._params = params or CandidateParams()
+        if camera_info is not None and not self._params.free_space_radius > 0:
+            raise ValueError("CandidateIdentifiers: camera_info is for the depth check, which needs "
+                             "params.free_space_radius > 0")
         if self._params.pose_tolerance >= period:
             self._params = CandidateParams(**{**self._params.__dict__, "pose_tolerance": 0.3 * period})
         self._features = self.DeclareAbstractInputPort(
@@ -139,6 +155,11 @@ class CandidateIdentifiers(LeafSystem):
         self._reset = self.DeclareVectorInputPort("reset", 1)
         self._reference = self.DeclareVectorInputPort("reference_x", N_UNKNOWNS)
         self._sigma = self.DeclareVectorInputPort("allowable_error", 1)
+        self._intrinsics = self._depth = self._time = None
+        if camera_info is not None:
+            self._intrinsics = intrinsics_from_camera_info(camera_info)
+            self._depth = self.DeclareAbstractInputPort("depth_image", AbstractValue.Make(ImageDepth32F()))
+            self._time = self.DeclareVectorInputPort("image_time", 1)
         self._empty = candidates.empty_solution(self._formulation.criteria)
         self._bank = self.DeclareAbstractState(AbstractValue.Make(CandidateBank()))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
@@ -194,5 +215,16 @@ class CandidateIdentifiers(LeafSystem):
             self.bank(context), self._params, self._formulation.criteria, context.get_time(), reset,
             self._X_WH.Eval(context).GetAsMatrix4(), features.time, features.ids, features.p_CP,
             features.valid, on_body, reference, self._formulation.forgetting_factor, in_body_cell, sigma,
+            self._depth_gap(context, features.time),
         )  # fmt: skip
         state.get_mutable_abstract_state(self._bank).set_value(new)
+
+    def _depth_gap(self, context, features_time: float):
+        """``candidates.step``'s ``depth_gap`` for this frame, None without its depth image."""
+        if self._depth is None or not self._depth.HasValue(context):
+            return None
+        depth = self._depth.Eval(context).data
+        size = (self._intrinsics.height, self._intrinsics.width)
+        if depth.shape[:2] != size or not _same_frame(self._time, context, features_time):
+            return None
+        return partial(depth_gap, depth, self._intrinsics, radius=self._params.free_space_radius)

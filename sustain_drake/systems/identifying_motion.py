@@ -9,8 +9,10 @@ from pydrake.systems.framework import LeafSystem
 from sustain_drake.identification import coordination
 
 # State vector: [output id, last detector id seen, time of the last request (own or detector's),
-# own requests so far], then the output request [joint, q_1..q_n].
-_ID, _DETECTOR_ID, _LAST_TIME, _OWN = range(4)
+# own requests so far, time of the last own request, time of the last one made over the detector's],
+# then the output request [joint, q_1..q_n].
+_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _LAST_OWN, _LAST_FORCED = range(6)
+_REQUEST = 6
 
 
 class IdentifyingMotion(LeafSystem):
@@ -19,7 +21,11 @@ class IdentifyingMotion(LeafSystem):
     go to the farthest (max-norm, rad) of ``num_draws`` postures drawn uniformly in
     ``joint_ranges`` from the current one. Eq. (30)'s statistic converges when the hand turns
     through several axes (a gap ``lambda_15 / lambda_16`` and a rotation, SSD); the random babbling
-    sometimes stays near one posture for tens of seconds.
+    sometimes stays near one posture for tens of seconds. While identifying it also asks for one at
+    least every ``max_hold`` s (default: three intervals), however often the detector asks, and
+    holds the detector's requests back for one interval after such a one (the arm on its way): the
+    detector's confirming trials can follow each other for tens of seconds (after the slip of
+    ``hand_eye.yaml`` with seed 1: 55 s within 0.1 rad of one posture), and then nothing converges.
 
     .. pydrake_system::
 
@@ -40,27 +46,29 @@ class IdentifyingMotion(LeafSystem):
     """
 
     def __init__(self, joint_ranges, interval: float = 2.5, num_draws: int = 8, seed: int = 0,
-                 period: float = 1.0 / 30.0):  # fmt: skip
+                 period: float = 1.0 / 30.0, max_hold: float | None = None):  # fmt: skip
         super().__init__()
         ranges = np.asarray(joint_ranges, float)
         if ranges.ndim != 2 or ranges.shape[1] != 2 or not np.all(ranges[:, 1] > ranges[:, 0]):
             raise ValueError(f"IdentifyingMotion: joint_ranges must be n x [lower, upper], got "
                              f"{joint_ranges}")
-        if not (interval > 0 and num_draws >= 1 and period > 0):
-            raise ValueError("IdentifyingMotion: interval and period must be > 0, num_draws >= 1")
-        self._ranges, self._interval = ranges, float(interval)
+        max_hold = 3.0 * interval if max_hold is None else max_hold
+        if not (interval > 0 and num_draws >= 1 and period > 0 and max_hold >= interval):
+            raise ValueError("IdentifyingMotion: interval and period must be > 0, num_draws >= 1, "
+                             "max_hold >= interval")
+        self._ranges, self._interval, self._max_hold = ranges, float(interval), float(max_hold)
         self._draws, self._seed = int(num_draws), int(seed)
         n = ranges.shape[0]
         self._detector = self.DeclareVectorInputPort("detector_confirm", 2 + n)
         self._mode = self.DeclareVectorInputPort("mode", 1)
         self._q = self.DeclareVectorInputPort("joint_positions", n)
-        initial = np.zeros(4 + 1 + n)
-        initial[4] = -1.0  # the output request's joint: -1, a usual move
+        initial = np.zeros(_REQUEST + 1 + n)
+        initial[_REQUEST] = -1.0  # the output request's joint: -1, a usual move
         self._state = self.DeclareDiscreteState(initial)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort(
             "confirm", 2 + n, lambda c, o: o.SetFromVector(
-                np.concatenate([[self._vector(c)[_ID]], self._vector(c)[4:]])),
+                np.concatenate([[self._vector(c)[_ID]], self._vector(c)[_REQUEST:]])),
             prerequisites_of_calc={self.discrete_state_ticket(self._state)})  # fmt: skip
 
     def _vector(self, context) -> np.ndarray:
@@ -70,20 +78,26 @@ class IdentifyingMotion(LeafSystem):
         x = self._vector(context).copy()
         t = context.get_time()
         request = self._detector.Eval(context) if self._detector.HasValue(context) else x[[_DETECTOR_ID]]
-        if request[0] != x[_DETECTOR_ID]:  # the detector's request first (body detection, §3.3)
+        identifying = int(self._mode.Eval(context)[0]) == coordination.IDENTIFY
+        # While identifying, a far posture at least every max_hold; one made over the detector's
+        # requests has the arm for an interval (the detector's request stays pending till then).
+        overdue = identifying and t - x[_LAST_OWN] >= self._max_hold  # from the start before the first
+        waits = identifying and (overdue or t - x[_LAST_FORCED] < self._interval)
+        if request[0] != x[_DETECTOR_ID] and not waits:  # the detector's first (body detection, §3.3)
             x[_DETECTOR_ID] = request[0]
             x[_ID] += 1
             x[_LAST_TIME] = t
-            x[4:] = request[1:]
-        elif (int(self._mode.Eval(context)[0]) == coordination.IDENTIFY
-              and t - x[_LAST_TIME] >= self._interval):  # fmt: skip
+            x[_REQUEST:] = request[1:]
+        elif identifying and (overdue or t - x[_LAST_TIME] >= self._interval):
             q = np.asarray(self._q.Eval(context), float)
             rng = np.random.default_rng([self._seed, int(x[_OWN])])
             draws = rng.uniform(self._ranges[:, 0], self._ranges[:, 1], (self._draws, q.size))
             far = draws[np.argmax(np.max(np.abs(draws - q), axis=1))]
             x[_ID] += 1
             x[_OWN] += 1
-            x[_LAST_TIME] = t
-            x[4] = -1.0  # a usual move after the rest there
-            x[5:] = far
+            x[_LAST_TIME] = x[_LAST_OWN] = t
+            if overdue:
+                x[_LAST_FORCED] = t
+            x[_REQUEST] = -1.0  # a usual move after the rest there
+            x[_REQUEST + 1:] = far
         state.get_mutable_vector(self._state).SetFromVector(x)
