@@ -342,7 +342,8 @@ def plot(handle, diagram, context, metrics, path: Path) -> None:
     # Only the logged samples with a new observation (the observed point was seen since the last).
     new = np.concatenate([[False], np.diff(observation[:, 0]) > 0])
     s_t = np.where(observing & new & np.isfinite(observation[:, 1]), observation[:, 1], np.nan)
-    axes[2].semilogy(t, np.maximum(s_t, 1e-12), ".", ms=1.5, label="$s_t$ (m$^2$)")
+    # s_t = 0: a frame with only the depth check, which saw the tool where the model puts it.
+    axes[2].semilogy(t, np.maximum(s_t, 1e-9), ".", ms=1.5, label="$s_t$ (m$^2$; 0 drawn at 1e-9)")
     axes[2].semilogy(t, np.where(observing, sigma[:, 0], np.nan), "r", lw=1, label="allowable error")
     axes[2].set_ylabel("error")
     axes[2].legend(loc="upper right", fontsize=8)

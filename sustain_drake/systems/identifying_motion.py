@@ -9,10 +9,12 @@ from pydrake.systems.framework import LeafSystem
 from sustain_drake.identification import coordination
 
 # State vector: [output id, last detector id seen, time of the last request (own or detector's),
-# own requests so far, time of the last own request, time of the last one made over the detector's],
-# then the output request [joint, q_1..q_n].
-_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _LAST_OWN, _LAST_FORCED = range(6)
-_REQUEST = 6
+# own requests so far, since when the arm stays near one posture, time of the last request made
+# over the detector's], that posture (n), then the output request [joint, q_1..q_n].
+_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED = range(6)
+_POSTURE = 6
+_REACHED = 0.05  # rad (max-norm): the arm is at a requested posture
+_NEAR = 0.2  # rad (max-norm): the arm stays near one posture (the confirming trials' reach)
 
 
 class IdentifyingMotion(LeafSystem):
@@ -21,11 +23,12 @@ class IdentifyingMotion(LeafSystem):
     go to the farthest (max-norm, rad) of ``num_draws`` postures drawn uniformly in
     ``joint_ranges`` from the current one. Eq. (30)'s statistic converges when the hand turns
     through several axes (a gap ``lambda_15 / lambda_16`` and a rotation, SSD); the random babbling
-    sometimes stays near one posture for tens of seconds. While identifying it also asks for one at
-    least every ``max_hold`` s (default: three intervals), however often the detector asks, and
-    holds the detector's requests back for one interval after such a one (the arm on its way): the
-    detector's confirming trials can follow each other for tens of seconds (after the slip of
-    ``hand_eye.yaml`` with seed 1: 55 s within 0.1 rad of one posture), and then nothing converges.
+    sometimes stays near one posture for tens of seconds. When, while identifying, the arm has stayed
+    within 0.2 rad (max-norm) of one posture for ``max_hold`` s (default: three intervals), it asks
+    for one however often the detector asks, and holds the detector's requests back until the arm
+    is there (0.05 rad, or ``max_hold`` s): the detector's confirming trials can follow each other
+    for tens of seconds (after the slip of ``hand_eye.yaml`` with seed 1: 55 s within 0.1 rad of
+    one posture), and then nothing converges.
 
     .. pydrake_system::
 
@@ -62,13 +65,16 @@ class IdentifyingMotion(LeafSystem):
         self._detector = self.DeclareVectorInputPort("detector_confirm", 2 + n)
         self._mode = self.DeclareVectorInputPort("mode", 1)
         self._q = self.DeclareVectorInputPort("joint_positions", n)
-        initial = np.zeros(_REQUEST + 1 + n)
-        initial[_REQUEST] = -1.0  # the output request's joint: -1, a usual move
+        self._request = _POSTURE + n  # where the output request starts in the state
+        initial = np.zeros(self._request + 1 + n)
+        initial[self._request] = -1.0  # the output request's joint: -1, a usual move
+        initial[_LAST_FORCED] = -np.inf
+        initial[_POSTURE:self._request] = np.inf  # no posture yet: the first sets it
         self._state = self.DeclareDiscreteState(initial)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort(
             "confirm", 2 + n, lambda c, o: o.SetFromVector(
-                np.concatenate([[self._vector(c)[_ID]], self._vector(c)[_REQUEST:]])),
+                np.concatenate([[self._vector(c)[_ID]], self._vector(c)[self._request:]])),
             prerequisites_of_calc={self.discrete_state_ticket(self._state)})  # fmt: skip
 
     def _vector(self, context) -> np.ndarray:
@@ -79,25 +85,32 @@ class IdentifyingMotion(LeafSystem):
         t = context.get_time()
         request = self._detector.Eval(context) if self._detector.HasValue(context) else x[[_DETECTOR_ID]]
         identifying = int(self._mode.Eval(context)[0]) == coordination.IDENTIFY
-        # While identifying, a far posture at least every max_hold; one made over the detector's
-        # requests has the arm for an interval (the detector's request stays pending till then).
-        overdue = identifying and t - x[_LAST_OWN] >= self._max_hold  # from the start before the first
-        waits = identifying and (overdue or t - x[_LAST_FORCED] < self._interval)
+        q = np.asarray(self._q.Eval(context), float)
+        if not np.max(np.abs(q - x[_POSTURE:self._request])) <= _NEAR:
+            x[_POSTURE:self._request], x[_NEAR_SINCE] = q, t  # the arm left: a new posture
+        # While identifying, a far posture when the arm stayed near one for max_hold (however often
+        # the detector asks); it has the arm until it is there (the detector's request stays
+        # pending till then), for max_hold at most.
+        overdue = (identifying and t - x[_NEAR_SINCE] >= self._max_hold
+                   and t - x[_LAST_FORCED] >= self._max_hold)
+        on_its_way = (t - x[_LAST_FORCED] < self._max_hold
+                      and np.max(np.abs(q - x[self._request + 1:])) > _REACHED)
+        waits = identifying and (overdue or on_its_way)
         if request[0] != x[_DETECTOR_ID] and not waits:  # the detector's first (body detection, §3.3)
             x[_DETECTOR_ID] = request[0]
             x[_ID] += 1
             x[_LAST_TIME] = t
-            x[_REQUEST:] = request[1:]
-        elif identifying and (overdue or t - x[_LAST_TIME] >= self._interval):
-            q = np.asarray(self._q.Eval(context), float)
+            x[self._request:] = request[1:]
+        elif identifying and (overdue or (t - x[_LAST_TIME] >= self._interval
+                                          and request[0] == x[_DETECTOR_ID])):  # none pending
             rng = np.random.default_rng([self._seed, int(x[_OWN])])
             draws = rng.uniform(self._ranges[:, 0], self._ranges[:, 1], (self._draws, q.size))
             far = draws[np.argmax(np.max(np.abs(draws - q), axis=1))]
             x[_ID] += 1
             x[_OWN] += 1
-            x[_LAST_TIME] = x[_LAST_OWN] = t
+            x[_LAST_TIME] = t
             if overdue:
                 x[_LAST_FORCED] = t
-            x[_REQUEST] = -1.0  # a usual move after the rest there
-            x[_REQUEST + 1:] = far
+            x[self._request] = -1.0  # a usual move after the rest there
+            x[self._request + 1:] = far
         state.get_mutable_vector(self._state).SetFromVector(x)
