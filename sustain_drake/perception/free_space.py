@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from sustain_drake.perception.optical_flow import PinholeIntrinsics
+from sustain_drake.perception.optical_flow import PinholeIntrinsics, depth_array
 
 
 def depth_gap(depth: np.ndarray, intrinsics: PinholeIntrinsics, p_CP: np.ndarray, radius: float) -> float:
@@ -30,12 +30,7 @@ def depth_gap(depth: np.ndarray, intrinsics: PinholeIntrinsics, p_CP: np.ndarray
     Depth pixels follow Drake's ``ImageDepth32F``: 0 is too close (in front), +inf too far
     (behind), NaN unknown (ignored).
     """
-    d = np.asarray(depth)
-    if d.ndim == 3 and d.shape[2] == 1:
-        d = d[:, :, 0]
-    if d.shape != (intrinsics.height, intrinsics.width):
-        raise ValueError(f"depth image is {d.shape[1::-1]} but the intrinsics are "
-                         f"{intrinsics.width}x{intrinsics.height}")
+    d = depth_array(depth, intrinsics)
     if not radius > 0:
         raise ValueError(f"radius must be positive, got {radius}")
     x, y, z = (float(v) for v in np.asarray(p_CP, dtype=float).ravel()[:3])

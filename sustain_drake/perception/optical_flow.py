@@ -234,6 +234,20 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     raise ValueError(f"color image must be H x W x {{1,3,4}}, got shape {img.shape}")
 
 
+def depth_array(depth: np.ndarray, intrinsics: PinholeIntrinsics) -> np.ndarray:
+    """The depth image as an H x W array (an H x W x 1 one squeezed), checked against the
+    intrinsics' size (ValueError otherwise)."""
+    d = np.asarray(depth)
+    if d.ndim == 3 and d.shape[2] == 1:
+        d = d[:, :, 0]
+    if d.ndim != 2:
+        raise ValueError(f"depth image must be H x W or H x W x 1, got shape {np.shape(depth)}")
+    if d.shape != (intrinsics.height, intrinsics.width):
+        raise ValueError(f"depth image is {d.shape[1]}x{d.shape[0]} but the intrinsics are "
+                         f"{intrinsics.width}x{intrinsics.height}")
+    return d
+
+
 def back_project(p_px: np.ndarray, depth: np.ndarray | None,
                  intrinsics: PinholeIntrinsics) -> tuple[np.ndarray, np.ndarray]:
     """3-D points ``p_CP`` (K x 3, metres) of pixels ``p_px`` from a depth image (pinhole model).
@@ -247,16 +261,9 @@ def back_project(p_px: np.ndarray, depth: np.ndarray | None,
     valid = np.zeros(p.shape[0], bool)
     if depth is None or p.shape[0] == 0:
         return p_CP, valid
-    d = np.asarray(depth)
-    if d.ndim == 3 and d.shape[2] == 1:
-        d = d[:, :, 0]
-    if d.size == 0:
+    if np.size(depth) == 0:
         return p_CP, valid
-    if d.ndim != 2:
-        raise ValueError(f"depth image must be H x W or H x W x 1, got shape {np.shape(depth)}")
-    if d.shape != (intrinsics.height, intrinsics.width):
-        raise ValueError(f"depth image is {d.shape[1]}x{d.shape[0]} but the intrinsics are "
-                         f"{intrinsics.width}x{intrinsics.height}")
+    d = depth_array(depth, intrinsics)
     u = np.rint(p[:, 0]).astype(np.int64)
     v = np.rint(p[:, 1]).astype(np.int64)
     inside = (u >= 0) & (u < d.shape[1]) & (v >= 0) & (v < d.shape[0])
