@@ -14,13 +14,14 @@ Q = np.array([0.0, 0.6, 1.1, 0.5, 0.0])
 
 
 class Scripted(LeafSystem):
-    """The state machine's mode (IDENTIFY before ``t_observe``) and the detector's requests (one,
-    id 1, at ``t_request``)."""
+    """The state machine's mode (IDENTIFY before ``t_observe``, and OBSERVE in ``[observe)``) and the
+    detector's requests (one, id 1, at ``t_request``)."""
 
-    def __init__(self, t_observe, t_request):
+    def __init__(self, t_observe, t_request, observe=(0.0, 0.0)):
         super().__init__()
         self.DeclareVectorOutputPort("mode", 1, lambda c, o: o.SetAtIndex(
-            0, coordination.OBSERVE if c.get_time() >= t_observe else coordination.IDENTIFY))  # fmt: skip
+            0, coordination.OBSERVE if c.get_time() >= t_observe or observe[0] <= c.get_time() < observe[1]
+            else coordination.IDENTIFY))  # fmt: skip
         self.DeclareVectorOutputPort("confirm", 7, lambda c, o: o.SetFromVector(
             [1.0, 2.0, *Q] if c.get_time() >= t_request else np.zeros(7)))  # fmt: skip
 
@@ -67,11 +68,24 @@ def test_nothing_of_its_own_while_observing():
 
 def test_a_far_posture_when_the_detector_holds_the_arm_near_one_posture():
     """The detector asking every 0.5 s for the same posture (its confirming trials one after the
-    other): while identifying, once the arm has stayed there for ``max_hold`` (3 intervals) a far
-    posture all the same, and the detector's requests wait until the arm is there (an arm that takes
-    1 s to reach a requested posture), then go on."""
+    other): while identifying again (a first convergence at 0.1 s, a change detected at 0.2 s), once
+    the arm has stayed there for ``max_hold`` (3 intervals) a far posture all the same, and the
+    detector's requests wait until the arm is there (an arm that takes 1 s to reach a requested
+    posture), then go on. Before any convergence the detector alone decides."""
+    new, own, forwarded = _chatty_detector(observed_before=0.2)
+    # The arm at the detector's posture from ~1.3 s (the first request, 1 s to get there): a far
+    # posture 3 s later; there at ~5.3 s, back at the detector's at ~6.7 s: the next 3 s later.
+    assert own == pytest.approx([4.3, 9.7], abs=0.15)
+    assert all(not (o <= f < o + 1.0) for o in own for f in forwarded)  # the arm on its way
+    assert len(forwarded) >= 12  # the detector is still served most of the time
+    new, own, forwarded = _chatty_detector(observed_before=0.0)
+    assert own == [] and len(forwarded) == 19  # every request after the first tick's
+
+
+def _chatty_detector(observed_before):
+    """The requests made over 10 s (time, joint), the own ones' and the detector's times."""
     builder = DiagramBuilder()
-    scripted = builder.AddSystem(Scripted(t_observe=np.inf, t_request=np.inf))
+    scripted = builder.AddSystem(Scripted(t_observe=np.inf, t_request=np.inf, observe=(0.1, observed_before)))
     detector = builder.AddSystem(Chatty())
     motion = builder.AddSystem(IdentifyingMotion(RANGES, interval=1.0, seed=3, period=0.1))
     posture = builder.AddSystem(MatrixGain(np.hstack([np.zeros((5, 2)), np.eye(5)])))  # q of the request
@@ -88,12 +102,7 @@ def test_a_far_posture_when_the_detector_holds_the_arm_near_one_posture():
         out = motion.GetOutputPort("confirm").Eval(motion.GetMyContextFromRoot(simulator.get_context()))
         joints.append((round(t, 1), out[0], out[1]))
     new = [(t, j) for (t, i, j), prev in zip(joints[1:], joints[:-1], strict=True) if i != prev[1]]
-    own, forwarded = [t for t, j in new if j == -1.0], [t for t, j in new if j == 2.0]
-    # The arm at the detector's posture from ~1.3 s (the first request, 1 s to get there): a far
-    # posture 3 s later; there at ~5.3 s, back at the detector's at ~6.7 s: the next 3 s later.
-    assert own == pytest.approx([4.3, 9.7], abs=0.15)
-    assert all(not (o <= f < o + 1.0) for o in own for f in forwarded)  # the arm on its way
-    assert len(forwarded) >= 12  # the detector is still served most of the time
+    return new, [t for t, j in new if j == -1.0], [t for t, j in new if j == 2.0]
 
 
 class Chatty(LeafSystem):

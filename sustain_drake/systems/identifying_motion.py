@@ -10,9 +10,10 @@ from sustain_drake.identification import coordination
 
 # State vector: [output id, last detector id seen, time of the last request (own or detector's),
 # own requests so far, since when the arm stays near one posture, time of the last request made
-# over the detector's], that posture (n), then the output request [joint, q_1..q_n].
-_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED = range(6)
-_POSTURE = 6
+# over the detector's, 1 once the state machine has observed], that posture (n), then the output
+# request [joint, q_1..q_n].
+_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED, _HAS_OBSERVED = range(7)
+_POSTURE = 7
 _REACHED = 0.05  # rad (max-norm): the arm is at a requested posture
 _NEAR = 0.2  # rad (max-norm): the arm stays near one posture (the confirming trials' reach)
 
@@ -23,12 +24,15 @@ class IdentifyingMotion(LeafSystem):
     go to the farthest (max-norm, rad) of ``num_draws`` postures drawn uniformly in
     ``joint_ranges`` from the current one. Eq. (30)'s statistic converges when the hand turns
     through several axes (a gap ``lambda_15 / lambda_16`` and a rotation, SSD); the random babbling
-    sometimes stays near one posture for tens of seconds. When, while identifying, the arm has stayed
-    within 0.2 rad (max-norm) of one posture for ``max_hold`` s (default: three intervals), it asks
-    for one however often the detector asks, and holds the detector's requests back until the arm
-    is there (0.05 rad, or ``max_hold`` s): the detector's confirming trials can follow each other
-    for tens of seconds (after the slip of ``hand_eye.yaml`` with seed 1: 55 s within 0.1 rad of
-    one posture), and then nothing converges.
+    sometimes stays near one posture for tens of seconds. When, while identifying again (after a
+    first convergence), the arm has stayed within 0.2 rad (max-norm) of one posture for ``max_hold``
+    s (default: three intervals), it asks for one however often the detector asks, and holds the
+    detector's requests back until the arm is there (0.05 rad, or ``max_hold`` s): the detector's
+    confirming trials can follow each other for tens of seconds (after the slip of
+    ``hand_eye.yaml`` with seed 1: 55 s within 0.1 rad of one posture), and then nothing converges.
+    Not before the first convergence: the body features the candidates come from are what those
+    trials find then (forcing far postures then too found seed 1's first tool point at 29.5 s, not
+    6 s, and delayed seed 2's first convergence to 40 s).
 
     .. pydrake_system::
 
@@ -88,10 +92,11 @@ class IdentifyingMotion(LeafSystem):
         q = np.asarray(self._q.Eval(context), float)
         if not np.max(np.abs(q - x[_POSTURE:self._request])) <= _NEAR:
             x[_POSTURE:self._request], x[_NEAR_SINCE] = q, t  # the arm left: a new posture
-        # While identifying, a far posture when the arm stayed near one for max_hold (however often
+        # While identifying again, a far posture when the arm stayed near one for max_hold (however often
         # the detector asks); it has the arm until it is there (the detector's request stays
         # pending till then), for max_hold at most.
-        overdue = (identifying and t - x[_NEAR_SINCE] >= self._max_hold
+        x[_HAS_OBSERVED] = max(x[_HAS_OBSERVED], float(not identifying))
+        overdue = (identifying and x[_HAS_OBSERVED] > 0 and t - x[_NEAR_SINCE] >= self._max_hold
                    and t - x[_LAST_FORCED] >= self._max_hold)
         on_its_way = (t - x[_LAST_FORCED] < self._max_hold
                       and np.max(np.abs(q - x[self._request + 1:])) > _REACHED)
