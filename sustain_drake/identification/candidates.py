@@ -30,7 +30,12 @@ system in an abstract state):
   ``reacquire_radius``) takes its place, so a re-seeded track of the same point keeps the
   observation going;
 - reset: a new reset value (a change was detected: the tool slipped or the camera moved) drops
-  every candidate; identification starts again from the body features seen then.
+  every candidate; identification starts again from the body features seen then, unless the
+  abandoned model's camera explains a new point (``keep_camera``: a slip) or, after a camera move,
+  the points it observed still fit one new camera with their ``p_HP`` (``keep_tool_points``);
+- beyond the paper, the depth image checks the adopted tool point every frame
+  (``free_space_radius``): a surface seen behind where the model puts it is a violation, tracked
+  points or not.
 """
 
 from __future__ import annotations
