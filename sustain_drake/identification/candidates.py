@@ -411,7 +411,7 @@ def step(
         previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) else None
         known = () if previous is not None else bank.known_points
         if previous is None and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
-            known = _observed_points(bank)  # the model cleared: the camera moved, the tool did not
+            known = _model_points(bank, params)  # the model cleared: the camera moved, the tool did not
         bank = replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
                        known_points=known, model_x=None,
                        last_reset=float(reset), round_start=math.nan,
@@ -736,14 +736,22 @@ def _with_camera(c: Candidate, x_previous: np.ndarray, p_HP: np.ndarray, mse: fl
     return replace(c, solution=solution)
 
 
-def _observed_points(bank: CandidateBank) -> tuple:
-    """``(feature_id, p_HP)`` of every point observing the adopted model (``keep_tool_points``):
-    the leader and the observed point (the adopted tool point unless handed over), the witness,
-    the observers."""
-    anchor = bank.model_x[12:15].copy()
+def _model_points(bank: CandidateBank, params: CandidateParams) -> tuple:
+    """``(feature_id, p_HP)`` of every point the adopted model holds (``keep_tool_points``): the
+    leader first (the adopted tool point), the observed point, the witness, the observers, then
+    every other candidate the model's camera explains (``_explained``, with ``observe_min_samples``
+    samples and ``min_rotation_spread``) with its best ``p_HP`` under that camera: points of the
+    hand as well as of the tool, all fixed in H, and the more of them, the more spread."""
+    x = bank.model_x
+    anchor = x[12:15].copy()
     points = [(bank.leader, anchor),
               (bank.observed, anchor if bank.observed_p_HP is None else bank.observed_p_HP),
               (bank.witness, bank.witness_p_HP)] + [(o[0], o[1]) for o in bank.observers]
+    R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
+    points += [(c.feature_id, best_p_HP_given_camera(c.statistic, R_WC, p_WC)) for c in bank.candidates
+               if c.solution.num_samples >= params.observe_min_samples
+               and rotation_spread(c.statistic) >= params.min_rotation_spread
+               and _explained(c, x, bank.adopted_mse, params)]
     known = {}
     for feature_id, p_HP in points:
         if feature_id >= 0 and p_HP is not None and feature_id not in known:
@@ -753,25 +761,32 @@ def _observed_points(bank: CandidateBank) -> tuple:
 
 def _camera_from_known_points(kept, known: dict, params: CandidateParams, adopted_mse: float):
     """``keep_tool_points``: the camera that the known points' samples since the reset give
-    (``camera_given_points``), if every one of them (with ``observe_min_samples`` samples) fits it
-    within ``observe_consistency`` of the adopted RMS error and they spread ``min_point_spread``
-    off a line.
-    Returns ``(x, mse, feature_id)`` (the estimate with the tool point of the point with the most
-    samples, its mean squared error, that point) or None."""
+    (``camera_given_points``; ``known`` in the order of ``_model_points``, the adopted tool point
+    first), from the points with ``observe_min_samples`` samples that fit it within
+    ``observe_consistency`` of the adopted RMS error (the camera solved again without the worst
+    while one does not: a track that slid onto another point, a point of a link that moved), if they
+    spread
+    ``min_point_spread`` off a line. Returns ``(x, mse, feature_id)`` (the estimate with the ``p_HP``
+    of the point nearest the adopted tool point in H, its mean squared error, that point) or None."""
     ready = [c for c in kept
              if c.feature_id in known and c.solution.num_samples >= params.observe_min_samples]
-    if not ready:
-        return None
-    statistics = [_S(c.statistic) for c in ready]
-    found = camera_given_points(statistics, np.array([known[c.feature_id] for c in ready]))
-    if found is None or not found[2] >= params.min_point_spread:
-        return None
-    R_WC, p_WC, _ = found
     limit = params.observe_consistency**2 * adopted_mse
-    errors = [mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, known[c.feature_id])) for c in ready]
-    if not max(errors) <= limit:
-        return None  # a point that no longer fits: the tool moved too, or a track slid
-    k = max(range(len(ready)), key=lambda i: ready[i].solution.num_samples)
+    while True:  # fit; while a point misfits, leave out the worst and fit again
+        if not ready:
+            return None  # the points do not agree on one camera
+        points = np.array([known[c.feature_id] for c in ready])
+        found = camera_given_points([_S(c.statistic) for c in ready], points)
+        if found is None:
+            return None
+        R_WC, p_WC, spread = found
+        errors = [mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, known[c.feature_id])) for c in ready]
+        if max(errors) <= limit:
+            break
+        ready.pop(int(np.argmax(errors)))
+    if not spread >= params.min_point_spread:
+        return None
+    anchor = next(iter(known.values()))
+    k = min(range(len(ready)), key=lambda i: float(np.linalg.norm(known[ready[i].feature_id] - anchor)))
     return pack_x(R_WC, p_WC, known[ready[k].feature_id]), errors[k], ready[k].feature_id
 
 
