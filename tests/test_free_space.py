@@ -1,12 +1,16 @@
-"""Free space along a ray: the depth behind a point, on a hand-made depth image."""
+"""Free space along a ray: the depth behind a point, on a hand-made depth image, and the
+candidate identifiers' depth inputs."""
 
 import math
 
 import numpy as np
 import pytest
+from pydrake.systems.sensors import CameraInfo, ImageDepth32F
 
+from sustain_drake.identification.candidates import CandidateParams
 from sustain_drake.perception.free_space import depth_gap
 from sustain_drake.perception.optical_flow import PinholeIntrinsics
+from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 
 K = PinholeIntrinsics(width=640, height=480, fx=580.0, fy=580.0, cx=320.0, cy=240.0)
 
@@ -50,3 +54,22 @@ def test_drake_depth_codes_and_unjudgeable_points():
         depth_gap(depth[:, :320], K, at_pixel(100, 100, 0.6), 0.005)
     with pytest.raises(ValueError, match="radius"):
         depth_gap(depth, K, at_pixel(100, 100, 0.6), 0.0)
+
+
+def test_candidate_identifiers_take_the_features_frames_depth_only_with_the_check_on():
+    """``CandidateIdentifiers(camera_info=...)``: the depth inputs exist only with the check on; the
+    depth image is used only when ``image_time`` says it is the features' frame."""
+    info = CameraInfo(640, 480, 580.0, 580.0, 319.5, 239.5)
+    on = CandidateParams(free_space_radius=0.005)
+    assert not CandidateIdentifiers(params=on).HasInputPort("depth_image")
+    with pytest.raises(ValueError, match="free_space_radius"):
+        CandidateIdentifiers(camera_info=info)
+    system = CandidateIdentifiers(params=on, camera_info=info)
+    context = system.CreateDefaultContext()
+    image = ImageDepth32F(640, 480)
+    image.mutable_data[:] = scene()[:, :, None]
+    system.GetInputPort("depth_image").FixValue(context, image)
+    system.GetInputPort("image_time").FixValue(context, [2.0])
+    assert system._depth_gap(context, 1.9) is None  # another frame's image
+    gap = system._depth_gap(context, 2.0)
+    assert gap(at_pixel(400, 240, 0.6)) == pytest.approx(1.4, abs=1e-6)  # free space behind the point
