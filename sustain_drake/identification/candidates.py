@@ -159,14 +159,15 @@ class CandidateParams:
             point shows the slip; the depth still shows that the tool left the place the model
             puts it (0: off; the system needs the depth image).
         keep_tool_points: after a reset that cleared the model (the state machine does so when the
-            camera moved), the points the abandoned model observed (the observed point, its witness,
-            the observers, each with its ``p_HP``) keep their ``p_HP``: a moved camera leaves the
-            held tool as it was. Their tracks that outlive the move give, once each has
-            ``observe_min_samples`` samples, the new camera in closed form (``camera_given_points``:
-            6 unknowns, not 15); it leads when every such point fits it within
-            ``observe_consistency`` of the adopted RMS error and their camera-frame points spread
-            at least ``min_point_spread`` off a line. Beyond the paper, which identifies
-            everything again (False: the paper's).
+            camera moved), the points the abandoned model held (``_model_points``: the observed
+            point, its witness, the observers and every candidate its camera explains, each with
+            its ``p_HP``) keep their ``p_HP``: a moved camera leaves the held tool as it was. Their
+            tracks that outlive the move give, once each has ``observe_min_samples`` samples, the
+            new camera in closed form (``camera_given_points``: 6 unknowns, not 15); it leads when
+            they fit it within ``observe_consistency`` of the adopted RMS error (the worst misfit
+            left out until they do) and their camera-frame points spread at least
+            ``min_point_spread`` off a line. Beyond the paper, which identifies everything again
+            (False: the paper's).
         min_point_spread: m, how far the known points' samples must lie from a line in the camera
             frame (their RMS distance from their principal line, ``keep_tool_points``): the rotation
             is pinned to about the noise over the spread times the root of the number of samples
