@@ -169,9 +169,11 @@ class CandidateParams:
             ``min_point_spread`` off a line. Beyond the paper, which identifies everything again
             (False: the paper's).
         min_point_spread: m, how far the known points' samples must lie from a line in the camera
-            frame (their RMS distance from their principal line, ``keep_tool_points``): the rotation
-            is pinned to about the noise over the spread times the root of the number of samples
-            (0.5 mm, 3 cm and 300 samples: 0.06 degree).
+            frame (their RMS distance from their principal line, ``keep_tool_points``): an error e
+            of a kept ``p_HP`` (learned under the previous camera) turns the new camera by about e
+            over the spread (the noise alone: the noise over the spread and the root of the number
+            of samples). At 3 cm the hand-eye runs had 0.11-0.26 degree; 6 cm halves that, and
+            when the spread takes longer the full identification comes first.
     """
 
     max_candidates: int = 8
@@ -203,7 +205,7 @@ class CandidateParams:
     keep_allowable_error: bool = False
     free_space_radius: float = 0.0
     keep_tool_points: bool = False
-    min_point_spread: float = 0.03
+    min_point_spread: float = 0.06
 
     def __post_init__(self):
         if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
