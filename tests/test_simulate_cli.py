@@ -72,6 +72,18 @@ def test_misspelled_key_is_one_line_error_naming_it(tmp_path, capsys):
     assert not (tmp_path / "o").exists()  # nothing written on bad input
 
 
+def test_an_experiment_setting_its_systems_refuse_is_one_line_error(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("duration: 1\ncamera: {rgb: true, depth: true}\nmotion: {joint_ranges: "
+                   "[[-0.7, 0.7], [0.2, 0.9], [0.7, 1.5], [-0.3, 1.0], [-1.2, 1.2]]}\n"
+                   "hand_eye: {enabled: true, identifying_motion_interval: 1.0, "
+                   "identifying_motion_max_hold: 0.5}\n")
+    assert main(["simulate", str(bad), "--out", str(tmp_path / "o"), "--no-replay"]) == 2
+    err = capsys.readouterr().err
+    assert "max_hold" in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "o").exists()  # nothing written on bad input
+
+
 def test_graph_writes_svg_when_dot_is_installed(tmp_path, monkeypatch, capsys):
     # A stand-in for graphviz's dot on PATH: it must receive the .dot text on stdin.
     bin_dir = tmp_path / "bin"

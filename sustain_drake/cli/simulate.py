@@ -127,7 +127,10 @@ def simulate_scenario(scenario_path: Path, duration: float | None = None,
     for section, module_name in EXPERIMENTS.items():
         if getattr(scenario, section).enabled:
             module = importlib.import_module(module_name)
-            experiments[section] = (module, module.add_to_diagram(builder, station, scenario, meshcat))
+            try:
+                experiments[section] = (module, module.add_to_diagram(builder, station, scenario, meshcat))
+            except ScenarioError as e:  # an experiment's settings the world or its systems refuse
+                raise CliError(f"{scenario_path}: {e}") from None
     diagram = builder.Build()
 
     simulator = Simulator(diagram)

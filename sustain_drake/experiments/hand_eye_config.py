@@ -61,6 +61,9 @@ class HandEyeConfig:
     ``camera_motion``: the camera-motion detector (off by default: the paper's observation rule
     alone). ``identifying_motion_interval``: s; > 0: while identifying, ask the babbling for a far
     posture when no confirming request came for that long (``systems.identifying_motion``); 0: off.
+    ``identifying_motion_max_hold``: s (at least the interval); after a first convergence, while
+    identifying again, the far posture also comes when the arm has stayed within 0.2 rad of one
+    posture that long, however often the detector asks.
     ``refine_points``: feed the candidates the refined points (``FeatureRefiner``: sub-pixel corner
     and robust depth, ``refinement``) instead of the tracker's. ``false_alarm_window``: s, a
     detection with no disturbance in that long before it is a false alarm (evaluation only).
@@ -71,6 +74,7 @@ class HandEyeConfig:
     candidates: CandidatesConfig = field(default_factory=CandidatesConfig)
     camera_motion: CameraMotionConfig = field(default_factory=CameraMotionConfig)
     identifying_motion_interval: float = 0.0
+    identifying_motion_max_hold: float = 3.0
     refine_points: bool = True
     refinement: RefinementConfig = field(default_factory=RefinementConfig)
     false_alarm_window: float = 2.0
