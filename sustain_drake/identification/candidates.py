@@ -165,7 +165,7 @@ class CandidateParams:
             tracks that outlive the move give, once each has ``observe_min_samples`` samples, the
             new camera in closed form (``camera_given_points``: 6 unknowns, not 15); it leads when
             they fit it within ``observe_consistency`` of the adopted RMS error (the worst misfit
-            left out until they do) and their camera-frame points spread at least
+            left out until they do, while more than half remain) and their camera-frame points spread at least
             ``min_point_spread`` off a line. Beyond the paper, which identifies everything again
             (False: the paper's).
         min_point_spread: m, how far the known points' samples must lie from a line in the camera
@@ -767,16 +767,17 @@ def _camera_from_known_points(kept, known: dict, params: CandidateParams, adopte
     (``camera_given_points``; ``known`` in the order of ``_model_points``, the adopted tool point
     first), from the points with ``observe_min_samples`` samples that fit it within
     ``observe_consistency`` of the adopted RMS error (the camera solved again without the worst
-    while one does not: a track that slid onto another point, a point of a link that moved), if they
-    spread
+    while one does not: a track that slid onto another point, a point of a link that moved; the
+    points that fit must be more than half of them), if they spread
     ``min_point_spread`` off a line. Returns ``(x, mse, feature_id)`` (the estimate with the ``p_HP``
     of the point nearest the adopted tool point in H, its mean squared error, that point) or None."""
     ready = [c for c in kept
              if c.feature_id in known and c.solution.num_samples >= params.observe_min_samples]
     limit = params.observe_consistency**2 * adopted_mse
+    total = len(ready)
     while True:  # fit; while a point misfits, leave out the worst and fit again
-        if not ready:
-            return None  # the points do not agree on one camera
+        if 2 * len(ready) <= total:
+            return None  # no majority agrees on one camera (a lone survivor fits anything near)
         points = np.array([known[c.feature_id] for c in ready])
         found = camera_given_points([_S(c.statistic) for c in ready], points)
         if found is None:
