@@ -138,7 +138,8 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     else:  # the camera notices its own motion from the static scene
         camera = builder.AddSystem(CameraMotionDetector(
             num_joints, tracker.grid.num_cells, (info.width(), info.height()),
-            hand_eye.camera_motion.params(), period=period, offset=0.75 * period))  # fmt: skip
+            hand_eye.camera_motion.params(), period=period, offset=0.75 * period,
+            camera_info=info))  # fmt: skip
         camera.set_name("camera_motion_detector")
         builder.Connect(tracker.GetOutputPort("tracked_features"), camera.GetInputPort("tracked_features"))
         for name in ("feature_on_body", "body_feature_cells"):
@@ -146,6 +147,11 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         builder.Connect(camera.GetOutputPort("camera_motion"), machine.GetInputPort("camera_motion"))
         # The identifiers' candidates without the static scene's features (stale body cells).
         builder.Connect(camera.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
+        if candidate_params.keep_tool_points:  # a camera turn re-found from the scene and the tool points
+            builder.Connect(camera.GetOutputPort("scene_turn"), candidates.GetInputPort("scene_turn"))
+        # A scene still since before a reset: the camera did not move, only the tool point is new.
+        builder.Connect(camera.GetOutputPort("scene_still_since"),
+                        candidates.GetInputPort("scene_still_since"))
     motion = None
     if hand_eye.identifying_motion_interval > 0:  # far postures while identifying (richer motion)
         motion = builder.AddSystem(IdentifyingMotion(

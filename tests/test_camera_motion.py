@@ -7,6 +7,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
+from pydrake.systems.sensors import CameraInfo
 
 from sustain_drake.perception import camera_motion
 from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState
@@ -200,7 +201,9 @@ class ScriptedFeatures(LeafSystem):
 def test_the_system_declares_one_move_and_its_context_clones():
     builder = DiagramBuilder()
     scene = builder.AddSystem(ScriptedFeatures())
-    detector = builder.AddSystem(CameraMotionDetector(5, 192, SIZE, period=1.0 / FPS, offset=0.5 / FPS))
+    info = CameraInfo(SIZE[0], SIZE[1], 290.0, 290.0, 159.5, 119.5)
+    detector = builder.AddSystem(CameraMotionDetector(5, 192, SIZE, period=1.0 / FPS, offset=0.5 / FPS,
+                                                      camera_info=info))  # fmt: skip
     q = builder.AddSystem(ConstantVectorSource(np.zeros(5)))
     for name in ("tracked_features", "feature_on_body"):
         builder.Connect(scene.GetOutputPort(name), detector.GetInputPort(name))
@@ -209,17 +212,31 @@ def test_the_system_declares_one_move_and_its_context_clones():
     simulator.AdvanceTo(1.02)
     context = detector.GetMyContextFromRoot(simulator.get_context())
     assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [0.0, 0.0]
+    # Judged still since the features became anchors (0.5 s still).
+    assert 0.5 <= detector.GetOutputPort("scene_still_since").Eval(context)[0] <= 0.6
     saved = simulator.get_context().Clone()
     simulator.AdvanceTo(1.2)
     context = detector.GetMyContextFromRoot(simulator.get_context())
     assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [1.0, 1.0]
+    assert detector.GetOutputPort("scene_still_since").Eval(context)[0] == np.inf  # moving
     simulator.AdvanceTo(2.0)
+    assert 1.5 < detector.GetOutputPort("scene_still_since").Eval(context)[0] < 1.7  # since the move ended
     assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [0.0, 1.0]
     displacement = detector.GetOutputPort("accumulated_displacement").Eval(context)[0]
     assert displacement == pytest.approx(30.0, rel=1e-6)
+    # The scene's correspondences across the move: every feature, 30 px further right after it
+    # (no depth given: the points before are NaN, far away).
+    turn = detector.GetOutputPort("scene_turn").Eval(context)
+    assert turn.move == 1 and len(turn) == 40 and np.all(np.isnan(turn.q0))
+    u0 = turn.b0[:, 0] / turn.b0[:, 2] * 290.0 + 159.5
+    u1 = turn.b1[:, 0] / turn.b1[:, 2] * 290.0 + 159.5
+    assert np.allclose(u1 - u0, 30.0)
     # The cloned context kept its own state (nothing in Python attributes).
     clone = detector.GetMyContextFromRoot(saved)
     assert list(detector.GetOutputPort("camera_motion").Eval(clone)) == [0.0, 0.0]
+    assert detector.GetOutputPort("scene_turn").Eval(clone).move == 0
+    with pytest.raises(ValueError, match="camera_info is 640x480"):
+        CameraMotionDetector(5, 192, SIZE, camera_info=CameraInfo(640, 480, 580.0, 580.0, 319.5, 239.5))
 
 
 def test_features_still_while_the_arm_moves_are_static_scene_not_hand_candidates():

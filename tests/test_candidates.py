@@ -42,7 +42,8 @@ def other_link(X_WH, k, p_LQ):
     return X, p_LQ
 
 
-def run(frames, bank=None, reset=0.0, reference=None, start=0, params=PARAMS):
+def run(frames, bank=None, reset=0.0, reference=None, start=0, params=PARAMS,
+        scene_still_since=math.inf):  # fmt: skip
     """frames(k, X_WH, rng) -> (ids, p_CP, valid, on_body); one frame per tick."""
     bank = CandidateBank() if bank is None else bank
     rng = np.random.default_rng(3)
@@ -53,7 +54,8 @@ def run(frames, bank=None, reset=0.0, reference=None, start=0, params=PARAMS):
             return bank, k
         ids, p, valid, body = out
         bank = candidates.step(bank, params, CRITERIA, k * DT, reset, X, k * DT, np.array(ids), np.array(p),
-                               np.array(valid), np.array(body), reference)
+                               np.array(valid), np.array(body), reference,
+                               scene_still_since=scene_still_since)
     return bank, k
 
 
@@ -278,8 +280,13 @@ def test_after_a_slip_the_previous_camera_is_kept_and_only_p_HP_is_new():
     def after(k, X, rng):  # reset at frame 200 (a change was detected); the point has slipped
         return None if k >= 320 else ([9], [seen(X, slipped, rng)], [True], [True])
 
-    params = CandidateParams(observe_min_samples=30, confirm_with_witness=False)
-    bank, _ = run(after, bank, reset=1.0, reference=x_true, start=k, params=params)
+    # keep_camera_min_samples: with the static scene judged still since before the reset the camera
+    # did not move, only p_HP is new (3 unknowns): fewer samples than a point needs to observe
+    # (observe_min_samples) will do. Not known to be still: observe_min_samples.
+    params = CandidateParams(observe_min_samples=100, keep_camera_min_samples=30, confirm_with_witness=False)
+    unknown, _ = run(after, bank, reset=1.0, reference=x_true, start=k, params=params)
+    assert unknown.adoptions[-1].time > (200 + 30) * DT  # (here the full identification came first)
+    bank, _ = run(after, bank, reset=1.0, reference=x_true, start=k, params=params, scene_still_since=0.0)
     last = bank.adoptions[-1]
     assert last.kind == "previous camera" and bank.leader == 9
     assert last.time == pytest.approx((200 + 30 - 1) * DT)  # as soon as it has 30 samples

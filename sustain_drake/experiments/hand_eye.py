@@ -255,6 +255,10 @@ def evaluate(handle, diagram, context) -> dict:
     t_x, x_log = _log(handle, diagram, context, "adopted_x")
     for d in disturbances:
         d["model_in_use_before"] = _camera_errors(t_x, x_log, t_pose, X_WC_log, d["time_s"] - 0.1)
+    # The worst camera the loop relied on, outside each change's window from the disturbance to
+    # its detection (the model is stale there by definition).
+    stale = [(d["time_s"], math.inf if d["detected_s"] is None else d["detected_s"]) for d in disturbances]
+    worst = _worst_model_in_use(t_x, x_log, t_pose, X_WC_log, stale)
     refinements = [e.time for e in events if e.kind == coordination.REFINED]
     false_alarms = [t for t in detections
                     if not any(0.0 <= t - d["time_s"] <= config.false_alarm_window for d in disturbances)]
@@ -275,6 +279,7 @@ def evaluate(handle, diagram, context) -> dict:
         "observed_fraction": _observed_fraction(handle, diagram, context),
         "refinement_times_s": refinements,
         "model_in_use_at_end": _camera_errors(t_x, x_log, t_pose, X_WC_log, float(t_x[-1])),
+        "model_in_use_worst": worst,
     }
 
 
@@ -295,6 +300,23 @@ def _camera_errors(t_x, x_log, t_pose, X_WC_log, t: float) -> dict | None:
     R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
     return {"time_s": t, "camera_position_error_mm": 1e3 * float(np.linalg.norm(p_WC - X_WC[:3, 3])),
             "camera_rotation_error_deg": math.degrees(rotation_angle(R_WC.T @ X_WC[:3, :3]))}
+
+
+def _worst_model_in_use(t_x, x_log, t_pose, X_WC_log, stale: list) -> dict | None:
+    """The largest camera position and rotation errors of the adopted ``x`` over the log, where
+    one is adopted and outside the ``stale`` windows ``(from, to)``, with their times (None: never
+    adopted there)."""
+    errors = [_camera_errors(t_x, x_log, t_pose, X_WC_log, float(t)) for t in t_x
+              if not any(a <= t <= b for a, b in stale)]
+    errors = [e for e in errors if e is not None]
+    if not errors:
+        return None
+    position = max(errors, key=lambda e: e["camera_position_error_mm"])
+    rotation = max(errors, key=lambda e: e["camera_rotation_error_deg"])
+    return {"camera_position_error_mm": position["camera_position_error_mm"],
+            "position_at_s": position["time_s"],
+            "camera_rotation_error_deg": rotation["camera_rotation_error_deg"],
+            "rotation_at_s": rotation["time_s"]}
 
 
 def _single_point_errors(identifier: EyeToHandIdentifier, X_WC: np.ndarray) -> dict:

@@ -51,6 +51,7 @@ from sustain_drake.identification.eye_to_hand import (
     EyeToHandIdentifier,
     EyeToHandSolution,
     build_A,
+    camera_after_turn,
     camera_given_points,
     pack_x,
     refine_joint,
@@ -89,9 +90,16 @@ class CandidateParams:
             ``observe_consistency`` times the adopted one's.
         primary_failures: samples the observed point alone violates the allowable error (its
             witness does not) before it is taken for a tracking failure and the witness replaces it.
-        keep_camera: after a reset, a candidate with ``observe_min_samples`` samples that the
+        keep_camera: after a reset, a candidate with ``keep_camera_min_samples`` samples that the
             abandoned model's camera explains (``observe_consistency``) leads at once with that
             camera and its own ``p_HP`` (a slipped tool: only the tool point changed).
+        keep_camera_min_samples: samples a candidate needs to lead with the kept camera when the
+            camera is known not to have moved (``step``'s ``scene_still_since``: the static scene
+            judged still since before the reset; else ``observe_min_samples``). Only its ``p_HP``
+            is new then (3 unknowns; the hand's turning, ``min_rotation_spread``, is what tells a
+            point of the hand from one of another link), so fewer can do: after a slip the rod may
+            turn out of view before any new track has 100. Unknown to have stayed, a camera that
+            turned is explained by the old one with a wrong ``p_HP`` over a short, narrow motion.
         confirm_with_witness: a converged candidate leads only if another candidate (with at least
             ``observe_min_samples`` samples) is explained by its camera within
             ``observe_consistency``: a wrong camera that happens to fit one track is not adopted.
@@ -168,6 +176,18 @@ class CandidateParams:
             left out until they do, while more than half remain) and their camera-frame points spread at least
             ``min_point_spread`` off a line. Beyond the paper, which identifies everything again
             (False: the paper's).
+        turn_radius, turn_max_shift, turn_min_samples: ``keep_tool_points`` with the static
+            scene's turn across the move (``step``'s ``scene_turn``): the camera's rotation comes
+            from the scene and its position from the known points' samples since the move
+            (``camera_after_turn``), as soon as they have ``turn_min_samples`` samples each: no
+            spread needed. A point tracked through the move is known by its id; a new track (the
+            turn ended the old one), if the hand turned ``min_rotation_spread`` over its samples,
+            is the known point nearest its best ``p_HP`` under the turned camera at the old
+            position, less the offset that the camera's shift (unknown, up to ``turn_max_shift``,
+            m) gives every track alike, within ``turn_radius`` (m; the only one within twice that:
+            the rod's marks lie 15-20 mm apart). The offset is the tracked-through points' own, or
+            the one that most new tracks (at least two) agree on (``_common_offset``). The points
+            must fit the camera within ``observe_consistency`` of the adopted RMS error, as above.
         min_point_spread: m, how far the known points' samples must lie from a line in the camera
             frame (their RMS distance from their principal line, ``keep_tool_points``): an error e
             of a kept ``p_HP`` (learned under the previous camera) turns the new camera by about e
@@ -190,6 +210,7 @@ class CandidateParams:
     observe_consistency: float = 3.0
     primary_failures: int = 10
     keep_camera: bool = True
+    keep_camera_min_samples: int = 100
     confirm_with_witness: bool = True
     min_rotation_spread: float = 0.15
     joint: bool = False
@@ -206,12 +227,17 @@ class CandidateParams:
     free_space_radius: float = 0.0
     keep_tool_points: bool = False
     min_point_spread: float = 0.06
+    turn_radius: float = 0.004
+    turn_max_shift: float = 0.03
+    turn_min_samples: int = 15
 
     def __post_init__(self):
-        if not (self.observe_min_samples >= 1 and self.primary_failures >= 1 and self.joint_min_samples >= 1
-                and self.max_archived >= 0 and self.max_observers >= 0 and self.blind_min_samples >= 0
-                and self.verified_overlap >= 0):
-            raise ValueError("observe_min_samples, primary_failures and joint_min_samples must be >= 1; "
+        counts = (self.observe_min_samples, self.keep_camera_min_samples, self.primary_failures,
+                  self.joint_min_samples, self.turn_min_samples)
+        if not (min(counts) >= 1 and self.max_archived >= 0 and self.max_observers >= 0
+                and self.blind_min_samples >= 0 and self.verified_overlap >= 0):
+            raise ValueError("observe_min_samples, keep_camera_min_samples, primary_failures, "
+                             "joint_min_samples and turn_min_samples must be >= 1; "
                              "max_archived, max_observers, blind_min_samples and verified_overlap "
                              f">= 0 ({self})")
         if not self.max_candidates >= 1:
@@ -226,7 +252,7 @@ class CandidateParams:
                 raise ValueError(f"{name} must be >= 0, got {value}")
         for name in ("max_hand_radius", "gate_margin", "max_lost_time", "max_unconverged_time",
                      "reacquire_radius", "pose_tolerance", "reject_rms", "observation_jump",
-                     "min_rotation_spread", "min_point_spread"):
+                     "min_rotation_spread", "min_point_spread", "turn_radius", "turn_max_shift"):
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a positive number, got {value}")
@@ -310,6 +336,10 @@ class CandidateBank:
     tool_observed: bool = False  # a tool point gave this frame's observation sample
     model_x: np.ndarray | None = None  # the adopted estimate while there is a leader (Eq. (36))
     known_points: tuple = ()  # after a camera move: (feature_id, p_HP) the abandoned model observed
+    moved_from_x: np.ndarray | None = None  # the model a camera move cleared (keep_tool_points)
+    moved_at: float = math.nan  # s, when that reset came
+    turn: object | None = None  # the static scene's turn across that move (``step``'s scene_turn)
+    reset_time: float = -math.inf  # s, when the last reset came
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -390,6 +420,8 @@ def step(
     in_body_cell: np.ndarray | None = None,
     allowable_error: float = math.inf,
     depth_gap: Callable[[np.ndarray], float] | None = None,
+    scene_turn=None,
+    scene_still_since: float = math.inf,
 ) -> CandidateBank:
     """One tick at ``time``: the reset, the hand pose, then (on a new frame) admission, feeding,
     loss, the leader and the observation. Returns the new bank.
@@ -409,19 +441,37 @@ def step(
         depth_gap: this frame's depth check (``free_space_radius``): for a point in the camera
             frame, how far behind it the camera sees a surface, m (NaN: cannot tell). None: no
             depth image for this frame.
+        scene_turn: the static scene's correspondences across the last camera move (a
+            ``perception.camera_motion.SceneTurn``: ``move``, ``start``, ``time``, ``b0``, ``q0``,
+            ``b1``), or None. Used with ``keep_tool_points`` when the move it belongs to (its
+            episode began before the reset that cleared the model and ended after) cleared the
+            model: the camera is then the old one turned, its position from the tool points.
+        scene_still_since: since when the static scene has been judged still (s; a
+            ``CameraMotionDetector``'s; inf: not known): if since before the last reset, the
+            camera did not move and the kept camera leads with ``keep_camera_min_samples``.
     """
     if reset != bank.last_reset:
         previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) else None
         known = () if previous is not None else bank.known_points
+        # The camera before a move whose turn has not come yet: the resets that follow while the
+        # camera still moves (no leader in between) keep it; one after the turn is a new change.
+        moved_from, moved_at = (bank.moved_from_x, bank.moved_at) if bank.turn is None else (None, math.nan)
         if previous is None and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
             known = _model_points(bank, params)  # the model cleared: the camera moved, the tool did not
+            moved_from, moved_at = bank.model_x, float(time)
+        elif previous is not None or bank.leader >= 0:
+            moved_from, moved_at = None, math.nan
         bank = replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
-                       known_points=known, model_x=None,
+                       known_points=known, model_x=None, moved_from_x=moved_from, moved_at=moved_at,
+                       turn=None, reset_time=float(time),
                        last_reset=float(reset), round_start=math.nan,
                        observed_last=None, observed_p_HP=None,
                        witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
                        observers=(), refined_solution=None, last_refinement=-math.inf)
     bank = record_pose(bank, time, X_WH)
+    if (scene_turn is not None and bank.moved_from_x is not None and bank.turn is None and scene_turn.move > 0
+            and scene_turn.start <= bank.moved_at <= scene_turn.time):
+        bank = replace(bank, turn=scene_turn)  # the turn of the move that cleared the model
     if bank.leader >= 0 and x_is_set(reference_x):
         bank = replace(bank, model_x=np.array(reference_x, dtype=float))
     if not frame_time > bank.last_frame:
@@ -522,7 +572,9 @@ def step(
             # A slipped tool leaves the camera where it was: if the abandoned model's camera
             # explains a candidate's samples (with its own p_HP), only p_HP is re-identified.
             options = _consistent(replace(bank, candidates=tuple(kept)), params, row, usable,
-                                  bank.previous_x, (p_CP, X_frame))
+                                  bank.previous_x, (p_CP, X_frame), min_samples=(
+                                      params.keep_camera_min_samples if scene_still_since <= bank.reset_time
+                                      else params.observe_min_samples))
             if options:
                 mse, leader, p_HP, _ = min(options, key=lambda o: o[0])
                 best = next(c for c in kept if c.feature_id == leader)
@@ -535,8 +587,14 @@ def step(
                                                   best.admitted, round_start, best.solution.estimate,
                                                   "previous camera"),)
     elif leader < 0 and bank.known_points:
-        # A moved camera: the points the abandoned model observed kept their p_HP.
-        found = _camera_from_known_points(kept, dict(bank.known_points), params, bank.adopted_mse)
+        # A moved camera: the points the abandoned model observed kept their p_HP; the static scene
+        # turned with the camera.
+        found, kind = None, "scene turn, tool points kept"
+        if bank.turn is not None:
+            found = _camera_from_turn(kept, bank, params)
+        if found is None:
+            kind = "previous tool points"
+            found = _camera_from_known_points(kept, dict(bank.known_points), params, bank.adopted_mse)
         if found is not None:
             x, mse, leader = found
             best = next(c for c in kept if c.feature_id == leader)
@@ -545,8 +603,7 @@ def step(
                                 "converged: the tool points kept, the camera re-identified")
             kept = [best if c.feature_id == leader else c for c in kept]
             adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
-                                              best.admitted, round_start, best.solution.estimate,
-                                              "previous tool points"),)
+                                              best.admitted, round_start, best.solution.estimate, kind),)
     # Before a leader, a frame that fed any identifier counts as a sample (the state machine
     # checks a solution's samples against the count since a reset); after, observations count.
     count = bank.sample_count + (1 if fed and bank.leader < 0 else 0)
@@ -762,36 +819,104 @@ def _model_points(bank: CandidateBank, params: CandidateParams) -> tuple:
     return tuple(known.items())
 
 
+def _fit_dropping_misfits(pairs: list, solve, limit: float):
+    """Fit a camera to ``pairs`` (``(candidate, p_HP)``) with ``solve(pairs) -> (R_WC, p_WC, ...)``
+    or None; while a point misfits (mean squared error over ``limit``: a track that slid onto
+    another point, a point of a link that moved), leave out the worst and fit again, as long as the
+    points that fit are more than half of them (a lone survivor fits anything near). Returns
+    ``(found, pairs, errors)`` or None."""
+    total = len(pairs)
+    while 2 * len(pairs) > total:
+        found = solve(pairs)
+        if found is None:
+            return None
+        errors = [mean_squared_error_of(c.statistic, pack_x(found[0], found[1], p)) for c, p in pairs]
+        if max(errors) <= limit:
+            return found, pairs, errors
+        pairs = [pair for k, pair in enumerate(pairs) if k != int(np.argmax(errors))]
+    return None
+
+
+def _leading(pairs: list, errors: list, found, anchor: np.ndarray):
+    """``(x, mse, feature_id)`` of the fitted point nearest the adopted tool point ``anchor`` in H,
+    with the fitted camera."""
+    k = min(range(len(pairs)), key=lambda i: float(np.linalg.norm(pairs[i][1] - anchor)))
+    return pack_x(found[0], found[1], pairs[k][1]), errors[k], pairs[k][0].feature_id
+
+
 def _camera_from_known_points(kept, known: dict, params: CandidateParams, adopted_mse: float):
     """``keep_tool_points``: the camera that the known points' samples since the reset give
     (``camera_given_points``; ``known`` in the order of ``_model_points``, the adopted tool point
     first), from the points with ``observe_min_samples`` samples that fit it within
-    ``observe_consistency`` of the adopted RMS error (the camera solved again without the worst
-    while one does not: a track that slid onto another point, a point of a link that moved; the
-    points that fit must be more than half of them), if they spread
+    ``observe_consistency`` of the adopted RMS error (``_fit_dropping_misfits``), if they spread
     ``min_point_spread`` off a line. Returns ``(x, mse, feature_id)`` (the estimate with the ``p_HP``
     of the point nearest the adopted tool point in H, its mean squared error, that point) or None."""
-    ready = [c for c in kept
+    pairs = [(c, known[c.feature_id]) for c in kept
              if c.feature_id in known and c.solution.num_samples >= params.observe_min_samples]
-    limit = params.observe_consistency**2 * adopted_mse
-    total = len(ready)
-    while True:  # fit; while a point misfits, leave out the worst and fit again
-        if 2 * len(ready) <= total:
-            return None  # no majority agrees on one camera (a lone survivor fits anything near)
-        points = np.array([known[c.feature_id] for c in ready])
-        found = camera_given_points([_S(c.statistic) for c in ready], points)
-        if found is None:
-            return None
-        R_WC, p_WC, spread = found
-        errors = [mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, known[c.feature_id])) for c in ready]
-        if max(errors) <= limit:
-            break
-        ready.pop(int(np.argmax(errors)))
-    if not spread >= params.min_point_spread:
+    fit = _fit_dropping_misfits(pairs, lambda ps: camera_given_points(
+        [_S(c.statistic) for c, _ in ps], np.array([p for _, p in ps])),
+        params.observe_consistency**2 * adopted_mse)  # fmt: skip
+    if fit is None or not fit[0][2] >= params.min_point_spread:
         return None
-    anchor = next(iter(known.values()))
-    k = min(range(len(ready)), key=lambda i: float(np.linalg.norm(known[ready[i].feature_id] - anchor)))
-    return pack_x(R_WC, p_WC, known[ready[k].feature_id]), errors[k], ready[k].feature_id
+    return _leading(fit[1], fit[2], fit[0], next(iter(known.values())))
+
+
+def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
+    """``keep_tool_points`` with the scene's turn: the camera that the move left turned as the
+    static scene shows and placed where the known points' samples since the move put it
+    (``camera_after_turn``). The points: candidates with ``turn_min_samples`` samples that are a
+    known point, by id (tracked through the move) or by ``p_HP`` (``turn_radius``, see
+    ``CandidateParams``), fitted with ``_fit_dropping_misfits``. Returns ``(x, mse, feature_id)``
+    as ``_camera_from_known_points`` or None."""
+    known = dict(bank.known_points)
+    x0, turn = bank.moved_from_x, bank.turn
+    R_WC0, p_WC0 = x0[0:9].reshape(3, 3, order="F"), x0[9:12]
+    turned = camera_after_turn(R_WC0, p_WC0, turn.b0, turn.q0, turn.b1, [], [])
+    if turned is None:
+        return None
+    known_p = np.array(list(known.values()))
+    ready = [c for c in kept if c.solution.num_samples >= params.turn_min_samples]
+    pairs = [(c, known[c.feature_id]) for c in ready if c.feature_id in known]
+    # A new track (the turn ended the old one) is a known point seen from the turned camera at
+    # the old position: off by the camera's unknown shift, the same for every track (over the same
+    # time), so the shift is the offset most new tracks agree on.
+    new = [c for c in ready if c.feature_id not in known
+           and rotation_spread(c.statistic) >= params.min_rotation_spread]  # else a point of any link fits
+    guesses = np.array([best_p_HP_given_camera(c.statistic, turned[0], p_WC0) for c in new]).reshape(-1, 3)
+    tracked = [best_p_HP_given_camera(c.statistic, turned[0], p_WC0) - p for c, p in pairs]
+    offset = _common_offset(guesses, known_p, tracked, params)
+    if offset is not None:
+        for c, guess in zip(new, guesses, strict=True):
+            distance = np.linalg.norm(known_p - (guess - offset), axis=1)
+            nearest = np.argsort(distance)[:2]
+            if distance[nearest[0]] <= params.turn_radius and (
+                    nearest.size < 2 or distance[nearest[1]] > 2.0 * params.turn_radius):
+                pairs.append((c, known_p[nearest[0]]))
+    fit = _fit_dropping_misfits(pairs, lambda ps: camera_after_turn(
+        R_WC0, p_WC0, turn.b0, turn.q0, turn.b1, [_S(c.statistic) for c, _ in ps],
+        np.array([p for _, p in ps])), params.observe_consistency**2 * bank.adopted_mse)  # fmt: skip
+    if fit is None:
+        return None
+    return _leading(fit[1], fit[2], fit[0], known_p[0])
+
+
+def _common_offset(guesses: np.ndarray, known_p: np.ndarray, tracked: list, params: CandidateParams):
+    """The offset (in H) between new tracks' ``p_HP`` under the turned camera (``guesses``) and the
+    known points: the median offset of the points tracked through the move (``tracked``, their
+    own offsets) if any; else, among the offsets within ``turn_max_shift`` of a guess to a known
+    point, the one that the most guesses fit within ``turn_radius`` (at least two: one track fits
+    some mark for many shifts), the smallest of those. None if none."""
+    if tracked:
+        return np.median(np.array(tracked), axis=0)
+    options = (guesses[:, None, :] - known_p[None, :, :]).reshape(-1, 3)
+    options = options[np.linalg.norm(options, axis=1) <= params.turn_max_shift]
+    best, support = None, 1
+    for o in sorted(options, key=lambda o: float(np.linalg.norm(o))):
+        fits = np.linalg.norm(guesses[:, None, :] - o - known_p[None, :, :], axis=2).min(axis=1)
+        n = int(np.count_nonzero(fits <= params.turn_radius))
+        if n > support:
+            best, support = o, n
+    return best
 
 
 def _admit(feature_id, criteria, time, p_CP, X_WH) -> Candidate:
@@ -1041,12 +1166,13 @@ def _gated_row(feature_id, last, row, p_CP, X_WH, params):
     return k
 
 
-def _consistent(bank, params, row, usable, x, frame, exclude=(), verified=False):
-    """Candidates tracked now whose samples the adopted camera explains (each with its own best
-    ``p_HP``, least squares from its statistic), and whose point in this ``frame`` (``(p_CP,
-    X_WH)``) too (a frozen candidate's track may have slid onto the background since):
-    ``[(mse, feature_id, p_HP, row)]``. ``verified``: only candidates with ``verified_overlap``
-    samples taken while the adopted model was verified (the points that may observe it)."""
+def _consistent(bank, params, row, usable, x, frame, exclude=(), verified=False, min_samples=None):
+    """Candidates tracked now with ``min_samples`` samples (None: ``observe_min_samples``) whose
+    samples the adopted camera explains (each with its own best ``p_HP``, least squares from its
+    statistic), and whose point in this ``frame`` (``(p_CP, X_WH)``) too (a frozen candidate's track
+    may have slid onto the background since): ``[(mse, feature_id, p_HP, row)]``. ``verified``:
+    only candidates with ``verified_overlap`` samples taken while the adopted model was verified
+    (the points that may observe it)."""
     p_now, X_now = frame
     R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
     limit = params.observe_consistency**2 * bank.adopted_mse
@@ -1055,7 +1181,7 @@ def _consistent(bank, params, row, usable, x, frame, exclude=(), verified=False)
         k = row.get(c.feature_id)
         if k is None or not usable[k] or c.feature_id in exclude:
             continue
-        if c.solution.num_samples < params.observe_min_samples:
+        if c.solution.num_samples < (params.observe_min_samples if min_samples is None else min_samples):
             continue
         if verified and c.verified_samples < params.verified_overlap:
             continue  # first tracked while the model was not verified: its p_HP is unchecked

@@ -30,7 +30,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sustain_drake.identification.rotation import project_to_rotation, skew, so3_exp
+from sustain_drake.identification.rotation import nearest_rotation, project_to_rotation, skew, so3_exp
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     EigenSolution,
@@ -251,9 +251,7 @@ def refine(
         else:
             break  # no decrease along the Gauss-Newton direction: at the optimum (to round-off)
         R, p_WC, p_HP, x, cost = R_new, p_WC_new, p_HP_new, x_new, cost_new
-    # Re-orthonormalise against drift from many small products (no effect on the cost).
-    U, _, Vt = np.linalg.svd(R)
-    R = U @ Vt
+    R = nearest_rotation(R)  # against drift from many small products (no effect on the cost)
     x = pack_x(R, p_WC, p_HP)
     return EyeToHandEstimate(
         R_WC=R,
@@ -379,8 +377,35 @@ def refine_joint(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP
         p_HP = p_HP + delta[6:].reshape(K, 3)
         if np.abs(delta).max() < tolerance:
             break
-    U, _, Vt = np.linalg.svd(R)
-    return U @ Vt, p_WC, p_HP
+    return nearest_rotation(R), p_WC, p_HP
+
+
+def _known_points_statistic(S_list: list[np.ndarray], p_HP: np.ndarray):
+    """``sum_k x_k^T S_k x_k`` with each ``p_HP`` fixed, as a quadratic form ``w^T P w`` in
+    ``w = [vec R_WC; p_WC; 1]`` (13 x 13), and the number of samples in all."""
+    p_HP = np.asarray(p_HP, dtype=float).reshape(-1, 3)
+    P = np.zeros((13, 13))
+    E = np.zeros((N_UNKNOWNS, 13))  # x = E w
+    E[:12, :12] = np.eye(12)
+    E[15, 12] = 1.0
+    for S, p in zip(S_list, p_HP, strict=True):
+        E[12:15, 12] = p
+        P += E.T @ np.asarray(S, dtype=float) @ E
+    return P, P[9, 9]
+
+
+def _position_given_rotation(P: np.ndarray, n: float, R_WC: np.ndarray) -> np.ndarray:
+    """The ``p_WC`` minimising ``w^T P w`` for a given ``R_WC`` (affine in ``vec R_WC``)."""
+    return -(P[9:12, 0:9] @ R_WC.reshape(9, order="F") + P[9:12, 12]) / n
+
+
+def position_given_rotation(S_list: list[np.ndarray], p_HP: np.ndarray, R_WC: np.ndarray):
+    """The camera position that best explains the samples of K points whose ``p_HP`` is known
+    (``S_k`` the raw statistics; ``p_HP``: K x 3) when its rotation ``R_WC`` is known too: Eq. (35)'s
+    least squares in ``p_WC`` alone, the mean of ``R_WH p_HP + p_WH - R_WC p_CP`` over the samples.
+    None for no samples."""
+    P, n = _known_points_statistic(S_list, p_HP)
+    return _position_given_rotation(P, n, np.asarray(R_WC, dtype=float)) if n > 0 else None
 
 
 def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):
@@ -397,23 +422,60 @@ def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):
     well the samples pin the rotation (a turn about any axis moves the points by at least the angle
     times it; 0: the points on a line, where the turn about it is free; points in a plane pin it).
     None for no samples."""
-    p_HP = np.asarray(p_HP, dtype=float).reshape(-1, 3)
-    P = np.zeros((13, 13))  # the statistics in w = [vec R_WC; p_WC; 1] (x = E w)
-    E = np.zeros((N_UNKNOWNS, 13))
-    E[:12, :12] = np.eye(12)
-    E[15, 12] = 1.0
-    for S, p in zip(S_list, p_HP, strict=True):
-        E[12:15, 12] = p
-        P += E.T @ np.asarray(S, dtype=float) @ E
-    n = P[9, 9]  # samples in all
+    P, n = _known_points_statistic(S_list, p_HP)
     if not n > 0:
         return None
     # p_WC = -(P_tR vec R + P_t1) / n; the cost's term linear in vec R is then 2 g^T vec R.
     g = P[0:9, 12] - P[0:9, 9:12] @ P[9:12, 12] / n
-    U, _, Vt = np.linalg.svd(-g.reshape(3, 3, order="F"))
-    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt  # max tr(-G^T R) on SO(3)
-    p_WC = -(P[9:12, 0:9] @ R.reshape(9, order="F") + P[9:12, 12]) / n
+    R = nearest_rotation(-g.reshape(3, 3, order="F"))  # max tr(-G^T R) on SO(3)
+    p_WC = _position_given_rotation(P, n, R)
     scatter = P[0:9:3, 0:9:3] - np.outer(P[0:9:3, 9], P[0:9:3, 9]) / n  # n C: P_RR = (sum a a^T) x I
     smallest = np.linalg.eigvalsh(scatter / n)[:2]  # the scatter off the principal line
     spread = math.sqrt(max(float(smallest.sum()), 0.0))
     return R, p_WC, spread
+
+
+def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: np.ndarray,
+                      b1: np.ndarray, S_list: list[np.ndarray], p_HP: np.ndarray, min_points: int = 10,
+                      iterations: int = 4):  # fmt: skip
+    """The camera after a move (beyond the paper) from two things that the move left as they were:
+    the static scene (its rotation) and the held tool (its position).
+
+    - The scene: per anchor its unit bearings ``b0`` (before, in C0) and ``b1`` (after, in C1) and
+      its point before ``q0`` (in C0, m; NaN rows: no depth, taken as far away); see
+      ``perception.camera_motion.SceneTurn``. A static point satisfies ``q0 - p_C0C1 ~ R_C0C1 b1``
+      (directions), so given the camera's shift ``p_C0C1`` the turn is an orthogonal Procrustes
+      problem on directions. Far anchors pin it to their pixel noise over the focal length, whatever
+      the shift; the shift itself (the parallax) they hardly show.
+    - The tool: points with known ``p_HP`` (K x 3, learned under the camera before) and their
+      samples after the move (``S_list``, raw statistics) give ``p_WC`` for a known ``R_WC``
+      (``position_given_rotation``).
+
+    Alternates the two from ``p_C0C1 = 0`` (``iterations`` times; the coupling is the shift over
+    the anchors' depths, small). Anchors whose direction misfits by more than three times the median
+    are left out (a feature of the moving arm, a track that jumped), each fit. Without tool samples
+    (``S_list`` empty) the position is left at ``p_WC0`` (the turn alone, e.g. to find the tool's
+    points again). Returns ``(R_WC, p_WC, rms_angle, num_anchors)`` (the anchors' RMS misfit, rad),
+    or None with fewer than ``min_points`` anchors left."""
+    b0, b1 = np.asarray(b0, float).reshape(-1, 3), np.asarray(b1, float).reshape(-1, 3)
+    q0 = np.asarray(q0, float).reshape(-1, 3)
+    far = ~np.all(np.isfinite(q0), axis=1)
+    R_WC0, p_WC0 = np.asarray(R_WC0, float), np.asarray(p_WC0, float)
+    P, n = _known_points_statistic(S_list, p_HP)
+    if b0.shape[0] < min_points:
+        return None
+    p_C0C1, inliers = np.zeros(3), np.ones(b0.shape[0], bool)
+    for _ in range(iterations if n > 0 else 1):
+        c = np.where(far[:, None], b0, q0 - p_C0C1)
+        c /= np.linalg.norm(c, axis=1, keepdims=True)
+        for _ in range(2):  # fit, leave out the misfits, fit again
+            R_C0C1 = nearest_rotation(c[inliers].T @ b1[inliers])
+            angle = np.linalg.norm(np.cross(b1 @ R_C0C1.T, c), axis=1)
+            inliers = angle <= max(3.0 * float(np.median(angle)), 1e-5)
+            if np.count_nonzero(inliers) < min_points:
+                return None
+        R_WC = R_WC0 @ R_C0C1
+        p_WC = _position_given_rotation(P, n, R_WC) if n > 0 else p_WC0.copy()
+        p_C0C1 = R_WC0.T @ (p_WC - p_WC0)
+    rms = math.sqrt(float(np.mean(angle[inliers] ** 2)))
+    return R_WC, p_WC, rms, int(np.count_nonzero(inliers))

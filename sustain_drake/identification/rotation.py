@@ -83,3 +83,11 @@ def project_to_rotation(x9: np.ndarray) -> RotationProjection:
     if ssq <= 0.0:
         return RotationProjection(R=R, scale=0.0, ssd=float("inf"), sign=sign)
     return RotationProjection(R=R, scale=sign * ssum / ssq, ssd=max(3.0 - ssum * ssum / ssq, 0.0), sign=sign)
+
+
+def nearest_rotation(M: np.ndarray) -> np.ndarray:
+    """The proper rotation ``R`` maximising ``trace(R^T M)`` (orthogonal Procrustes, Kabsch's
+    determinant fix): for ``M = sum_i a_i b_i^T`` the rotation taking the ``b_i`` nearest the
+    ``a_i``; for ``M`` near a rotation, its re-orthonormalisation."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=float))
+    return U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt

@@ -55,6 +55,20 @@ allowable error), so a move matters for a calibration used at depths up to ``z_m
 and the tool at 0.6-0.9 m: 4.2 px at 0.9 m, so ``move_px`` = 3 px counts every move the rule could
 see. Every threshold here is in pixels: at another image size scale them with the focal length
 (``diagrams/hand_eye.yaml``, 640 x 480: ``f`` = 580 px, each doubled).
+
+**The turn of the camera** (``SceneTurn``; given the intrinsics and the features' 3-D points).
+While the scene is still (the state not in an episode, the frame's displacement at most
+``view_still_px``), each anchor's pixel and 3-D point are averaged into the *view* of the still
+scene (a running mean over its last ``VIEW_FRAMES`` frames). At an episode's onset the view becomes
+the *view before* (if it has ``turn_frames`` frames: the scene was at rest before the move), and a
+new view starts once the scene rests again. When a declared move's view after has ``turn_frames``
+frames, the anchors seen in both views (each in at least half of either's frames) give the turn's
+correspondences: per anchor its bearing before and after (unit vectors in C0 and C1) and its point
+before (in C0, NaN without depth). The camera's rotation and translation are estimated from them
+downstream (``identification.eye_to_hand.camera_after_turn``, with the tool points for the
+translation): a far scene pins the rotation to a few hundredths of a degree, but not the position.
+The anchors' tracks through the move are used as they are (re-registering the view before against
+the image after moved them by 0.07 px median in ``diagrams/hand_eye.yaml``'s head turn).
 """
 
 from __future__ import annotations
@@ -64,6 +78,12 @@ from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
+
+from sustain_drake.perception.optical_flow import PinholeIntrinsics, pinhole_points
+
+# The view of the still scene is a running mean over at most this many frames (1 s at 30 Hz): a
+# slow drift of the camera below ``still_px`` does not smear it.
+VIEW_FRAMES = 30
 
 
 @dataclass(frozen=True)
@@ -81,16 +101,20 @@ class CameraMotionParams:
     min_frames: int = 2               # moving frames of an episode before it can be a camera move
     move_px: float = 3.0              # composed displacement of an episode that is a camera move
     exclude_static: bool = True       # static scene features are no body candidates (``static_features``)
+    view_still_px: float = 0.1        # a frame moving at most this adds to the view of the still scene
+    turn_frames: int = 5              # still frames before and after a move that give its turn (0: none)
 
     def __post_init__(self):
         times = (self.anchor_time, self.arm_speed, self.feature_still_px)
         if not (self.min_background >= 3 and self.inlier_px > 0 and 0 < self.min_inlier_fraction <= 1
                 and self.still_px >= 0 and self.rest_frames >= 1 and self.min_frames >= 1
                 and self.move_px > self.still_px and all(x >= 0 for x in times)
+                and 0 <= self.view_still_px <= self.still_px and self.turn_frames >= 0
                 and all(map(math.isfinite, (*times, self.inlier_px, self.still_px, self.move_px)))):
             raise ValueError("invalid camera motion parameters (min_background >= 3, inlier_px > 0, "
                              "0 < min_inlier_fraction <= 1, rest_frames and min_frames >= 1, "
-                             f"move_px > still_px >= 0, finite times and speeds >= 0): {self}")
+                             "move_px > still_px >= view_still_px >= 0, turn_frames >= 0, "
+                             f"finite times and speeds >= 0): {self}")
 
 
 @dataclass(frozen=True)
@@ -108,6 +132,43 @@ class FrameMotion:
 
 
 @dataclass(frozen=True)
+class SceneView:
+    """The still scene's anchors over the last ``VIEW_FRAMES`` of ``frames`` still frames: per
+    anchor (sorted ``ids``) its mean pixel ``px`` (K x 2), its mean 3-D point ``p_CP`` (K x 3, m,
+    camera frame; NaN where it never had depth), in how many of those frames it was seen
+    (``seen``, at most ``VIEW_FRAMES``) and had depth (``with_depth``), and the frame it was last
+    seen in (``last``, counting from 1). An anchor not seen for ``VIEW_FRAMES`` frames is dropped."""
+
+    ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    p_CP: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    seen: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    with_depth: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    last: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    frames: int = 0
+
+
+@dataclass(frozen=True)
+class SceneTurn:
+    """The correspondences of the static scene across camera move number ``move`` (0: none yet),
+    formed at ``time`` (s) from the move's episode starting at ``start`` (s): per anchor seen at rest
+    before and after the move, its unit bearing before ``b0`` (K x 3, in the camera frame C0 before),
+    its point before ``q0`` (K x 3, m, in C0; NaN rows without depth) and its unit bearing after
+    ``b1`` (K x 3, in the camera frame C1 after). A point of the static scene satisfies
+    ``q0 = R_C0C1 q1 + p_C0C1`` (``q1`` along ``b1``)."""
+
+    move: int = 0
+    time: float = -math.inf
+    start: float = -math.inf
+    b0: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    q0: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    b1: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def __len__(self) -> int:
+        return int(self.b0.shape[0])
+
+
+@dataclass(frozen=True)
 class CameraMotionState:
     """Everything carried from frame to frame (immutable: ``step`` returns a new one).
 
@@ -121,7 +182,12 @@ class CameraMotionState:
     ``arm_clock``, ``arm_still_since``: whether a joint moved at the last frame, for how long the
     arm has moved in all (s, between frames where it moved) and since when it has been at rest (s);
     ``still_clock``, ``still_px``: per feature, ``arm_clock`` when it became still and its pixel
-    then (moved along with the scene's motion since)."""
+    then (moved along with the scene's motion since). ``view``: the still scene now (``SceneView``;
+    empty while moving); ``view_before``: the one before the current or last move (None once its
+    turn is formed, or when the scene had not been at rest before); ``episode_start``: the current
+    or last episode's first moving frame (s); ``turn``: the last move's ``SceneTurn``;
+    ``judged_still_since``: since when every frame was judged and still, outside an episode (s; inf
+    now: moving, in an episode, or too few anchors to judge), so the camera has not moved since."""
 
     moving: bool = False
     moves: int = 0
@@ -139,6 +205,11 @@ class CameraMotionState:
     arm_moving: bool = False
     arm_clock: float = 0.0
     arm_still_since: float = -math.inf
+    view: SceneView = field(default_factory=SceneView)
+    view_before: SceneView | None = None
+    episode_start: float = -math.inf
+    turn: SceneTurn = field(default_factory=SceneTurn)
+    judged_still_since: float = math.inf
 
     def output(self) -> np.ndarray:
         """``[moving (0/1), moves, accumulated displacement (px)]``."""
@@ -185,6 +256,54 @@ def static_features(state: CameraMotionState, ids: np.ndarray, params: CameraMot
     return ~np.isnan(clock) & (state.arm_clock - np.nan_to_num(clock, nan=np.inf) >= params.anchor_time)
 
 
+def add_to_view(view: SceneView, ids: np.ndarray, px: np.ndarray, p_CP: np.ndarray,
+                valid: np.ndarray) -> SceneView:
+    """``view`` with one more still frame of anchors (``ids``, pixels ``px``, points ``p_CP`` with
+    ``valid`` depth): each anchor's running mean over its last ``VIEW_FRAMES`` sightings at most."""
+    ids = np.asarray(ids, np.int64).ravel()
+    order = np.argsort(ids)
+    ids, px = ids[order], np.asarray(px, float).reshape(-1, 2)[order]
+    p_CP = np.asarray(p_CP, float).reshape(-1, 3)[order]
+    valid = np.asarray(valid, bool).ravel()[order] & np.all(np.isfinite(p_CP), axis=1)
+    frame = view.frames + 1
+    recent = frame - view.last < VIEW_FRAMES  # the others are gone from the scene's view
+    all_ids = np.union1d(view.ids[recent], ids)
+    old = np.searchsorted(all_ids, view.ids[recent])
+    n = all_ids.size
+    mean_px, mean_p = np.zeros((n, 2)), np.full((n, 3), np.nan)
+    seen, with_depth, last = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    mean_px[old], mean_p[old] = view.px[recent], view.p_CP[recent]
+    seen[old], with_depth[old], last[old] = view.seen[recent], view.with_depth[recent], view.last[recent]
+    new = np.searchsorted(all_ids, ids)
+    seen[new] = np.minimum(seen[new] + 1, VIEW_FRAMES)
+    last[new] = frame
+    mean_px[new] += (px - mean_px[new]) / seen[new][:, None]
+    d = new[valid]
+    with_depth[d] = np.minimum(with_depth[d] + 1, VIEW_FRAMES)
+    first = with_depth[d, None] == 1  # the mean so far is NaN
+    mean_p[d] = np.where(first, p_CP[valid], mean_p[d] + (p_CP[valid] - mean_p[d]) / with_depth[d][:, None])
+    return SceneView(all_ids, mean_px, mean_p, seen, with_depth, last, frame)
+
+
+def bearings(px: np.ndarray, intrinsics: PinholeIntrinsics) -> np.ndarray:
+    """Unit vectors in the camera frame towards pixels ``px`` (K x 2): the pinhole model at depth 1,
+    normalised."""
+    b = pinhole_points(px, np.ones(np.asarray(px).reshape(-1, 2).shape[0]), intrinsics)
+    return b / np.linalg.norm(b, axis=1, keepdims=True)
+
+
+def scene_turn(before: SceneView, after: SceneView, intrinsics: PinholeIntrinsics, move: int, time: float,
+               start: float) -> SceneTurn:
+    """The ``SceneTurn`` of the anchors in both views, each seen in at least half of either
+    view's last ``VIEW_FRAMES`` frames (a track that came and went is left out)."""
+    common, i0, i1 = np.intersect1d(before.ids, after.ids, return_indices=True)
+    keep = ((2 * before.seen[i0] >= min(before.frames, VIEW_FRAMES))
+            & (2 * after.seen[i1] >= min(after.frames, VIEW_FRAMES)))
+    i0, i1 = i0[keep], i1[keep]
+    return SceneTurn(move, float(time), float(start), bearings(before.px[i0], intrinsics),
+                     before.p_CP[i0].copy(), bearings(after.px[i1], intrinsics))
+
+
 def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionParams,
                  points: np.ndarray) -> FrameMotion:
     """The global image motion of the background (``prev_px`` -> ``cur_px``, K x 2 each) and
@@ -209,11 +328,14 @@ def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionPa
 
 def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarray, flow_px: np.ndarray,
          robot: np.ndarray, joints_moving: np.ndarray, params: CameraMotionParams,
-         image_size: tuple[int, int]) -> CameraMotionState:  # fmt: skip
-    """One frame of tracked features at ``time`` (``ids``, ``p_px``, ``flow_px`` as in
-    ``optical_flow.TrackedFeatures``; ``robot``: per feature, a body feature or in a body cell;
-    ``joints_moving``: per actuator, it moves now). ``image_size`` is (width, height). Returns the new
-    state (``state`` itself for a frame not newer than the last one)."""
+         image_size: tuple[int, int], p_CP: np.ndarray | None = None, valid: np.ndarray | None = None,
+         intrinsics: PinholeIntrinsics | None = None) -> CameraMotionState:  # fmt: skip
+    """One frame of tracked features at ``time`` (``ids``, ``p_px``, ``flow_px``, and for the turn
+    ``p_CP`` and ``valid``, as in ``optical_flow.TrackedFeatures``; ``robot``: per feature, a body
+    feature or in a body cell; ``joints_moving``: per actuator, it moves now). ``image_size`` is
+    (width, height). With ``intrinsics`` (and ``params.turn_frames`` > 0) the views of the still
+    scene and the turn of each move are kept too (module docstring). Returns the new state
+    (``state`` itself for a frame not newer than the last one)."""
     if not time > state.last_time:
         return state
     ids = np.asarray(ids, np.int64).ravel()
@@ -254,14 +376,19 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
     since = np.where(restart, time, since)
     clock = np.where(restart, arm_clock, _remembered(state, ids, state.still_clock))
     order = np.argsort(ids)
+    judged_still = math.inf
+    if frame.judged and not frame.moving and not state.moving:
+        judged_still = min(state.judged_still_since, float(time))
     new = replace(state, ids=ids[order], still_since=since[order], still_clock=clock[order],
                   still_px=anchor_px[order],
                   last_time=float(time), last=frame, arm_moving=arm_moving, arm_clock=arm_clock,
-                  arm_still_since=arm_still_since)
+                  arm_still_since=arm_still_since, judged_still_since=judged_still)
     if frame.moving:
         M = np.vstack([frame.M, [0.0, 0.0, 1.0]])
-        if not state.moving:  # onset: a new episode
-            new = replace(new, moving=True, declared=False, M_episode=np.eye(3), frames=0)
+        if not state.moving:  # onset: a new episode; the still view so far is the view before
+            before = state.view if 0 < params.turn_frames <= state.view.frames else None
+            new = replace(new, moving=True, declared=False, M_episode=np.eye(3), frames=0, view=SceneView(),
+                          view_before=before, episode_start=float(time))
         M_episode = M @ new.M_episode
         accumulated = displacement(M_episode, points)
         new = replace(new, M_episode=M_episode, accumulated_px=accumulated, rest=0, frames=new.frames + 1)
@@ -271,4 +398,20 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
     if state.moving:
         rest = state.rest + 1
         new = replace(new, rest=rest, moving=rest < params.rest_frames)
+    if (intrinsics is not None and params.turn_frames > 0 and not new.moving and frame.judged
+            and frame.displacement_px <= params.view_still_px and p_CP is not None and valid is not None):
+        # After a move, the anchors of the view before that are still tracked count at once: a
+        # turn's perspective takes the image's edges off the similarity fit, so many anchors
+        # restart their still time during it (the turn's fit leaves out those that did move).
+        members = anchors
+        if new.view_before is not None:
+            members = anchors | (np.isin(ids, new.view_before.ids) & finite & ~robot)
+        new = replace(new, view=add_to_view(new.view, ids[members], p_px[members],
+                                            np.asarray(p_CP, float).reshape(-1, 3)[members],
+                                            np.asarray(valid, bool).ravel()[members]))
+        if new.view_before is not None and new.view.frames >= params.turn_frames:
+            if new.declared:  # a camera move (not a glitch): its turn
+                new = replace(new, turn=scene_turn(new.view_before, new.view, intrinsics, new.moves,
+                                                   float(time), new.episode_start))
+            new = replace(new, view_before=None)
     return new

@@ -8,11 +8,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
+from pydrake.systems.sensors import CameraInfo
 
 from sustain_drake.perception import camera_motion
-from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState
+from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState, SceneTurn
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
+from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,8 @@ class CameraMotionDetector(LeafSystem):
         - camera_motion
         - accumulated_displacement
         - feature_on_body
+        - scene_turn
+        - scene_still_since
 
     Inputs: ``tracked_features`` (``TrackedFeatures`` of the ``OpticalFlowTracker``: the tracks'
     own pixels and flows), ``feature_on_body`` (``FeatureBodyFlags`` of the
@@ -54,7 +58,13 @@ class CameraMotionDetector(LeafSystem):
     composed image displacement), ``feature_on_body`` (the input's ``FeatureBodyFlags`` with
     ``on_body`` and ``in_body_cell`` cleared for the static scene's features,
     ``camera_motion.static_features``, when ``params.exclude_static``: connect to the
-    ``CandidateIdentifiers``' ``feature_on_body``; unconnected flags: none on the body).
+    ``CandidateIdentifiers``' ``feature_on_body``; unconnected flags: none on the body),
+    ``scene_turn`` (``camera_motion.SceneTurn``: the static scene's correspondences across the last
+    camera move, ``move`` 0 before any; formed ``params.turn_frames`` still frames after the move,
+    only with ``camera_info``, the camera's intrinsics, and the tracked features' 3-D points;
+    connect to the ``CandidateIdentifiers``' ``scene_turn``), ``scene_still_since`` (1, s: since
+    when every frame was judged still, outside a move; inf while moving or when too few anchors
+    judge a frame: connect to the ``CandidateIdentifiers``' ``scene_still_since``).
 
     Every ``period`` s (offset ``offset``: after the coincidence detector's update of the same
     frame) a periodic unrestricted update runs one step on a new frame (a frame time not newer
@@ -64,12 +74,16 @@ class CameraMotionDetector(LeafSystem):
 
     def __init__(self, num_actuators: int, num_cells: int, image_size: tuple[int, int],
                  params: CameraMotionParams | None = None, period: float = 1.0 / 30.0,
-                 offset: float = 0.0):  # fmt: skip
+                 offset: float = 0.0, camera_info: CameraInfo | None = None):  # fmt: skip
         super().__init__()
         if not (np.isfinite(period) and period > 0):
             raise ValueError(f"period must be positive, got {period}")
         self._params = params or CameraMotionParams()
         self._size = (int(image_size[0]), int(image_size[1]))
+        self._intrinsics = None if camera_info is None else intrinsics_from_camera_info(camera_info)
+        if camera_info is not None and (camera_info.width(), camera_info.height()) != self._size:
+            raise ValueError(f"camera_info is {camera_info.width()}x{camera_info.height()} but the image is "
+                             f"{self._size[0]}x{self._size[1]}")
         self._n_c = int(num_cells)
         self._features = self.DeclareAbstractInputPort(
             "tracked_features", AbstractValue.Make(TrackedFeatures()))
@@ -86,6 +100,11 @@ class CameraMotionDetector(LeafSystem):
         self.DeclareAbstractOutputPort(
             "feature_on_body", lambda: AbstractValue.Make(FeatureBodyFlags()), self._calc_flags,
             prerequisites_of_calc={self.all_state_ticket(), self._flags.ticket()})  # fmt: skip
+        self.DeclareVectorOutputPort("scene_still_since", 1, lambda c, o: o.SetAtIndex(
+            0, self.motion_state(c).judged_still_since), prerequisites_of_calc=state)  # fmt: skip
+        self.DeclareAbstractOutputPort(
+            "scene_turn", lambda: AbstractValue.Make(SceneTurn()),
+            lambda c, o: o.set_value(self.motion_state(c).turn), prerequisites_of_calc=state)  # fmt: skip
 
     @property
     def params(self) -> CameraMotionParams:
@@ -106,7 +125,8 @@ class CameraMotionDetector(LeafSystem):
             f = self._features.Eval(context)
             robot = self._robot(context, f)
             new = replace(new, motion=camera_motion.step(
-                old.motion, f.time, f.ids, f.p_px, f.flow_px, robot, joints_moving, self._params, self._size))
+                old.motion, f.time, f.ids, f.p_px, f.flow_px, robot, joints_moving, self._params, self._size,
+                f.p_CP, f.valid, self._intrinsics))
         state.get_mutable_abstract_state(self._state).set_value(new)
 
     def _calc_flags(self, context, output) -> None:

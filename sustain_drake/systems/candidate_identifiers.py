@@ -15,6 +15,7 @@ from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank, CandidateParams
 from sustain_drake.identification.eye_to_hand import N_UNKNOWNS
 from sustain_drake.identification.sustainable_identifier import Verdict
+from sustain_drake.perception.camera_motion import SceneTurn
 from sustain_drake.perception.free_space import depth_gap
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.perception.point_refinement import RefinementParams, refine_points
@@ -100,6 +101,8 @@ class CandidateIdentifiers(LeafSystem):
         - allowable_error (optional)
         - depth_image (with camera_info)
         - image_time (optional, with camera_info)
+        - scene_turn (optional)
+        - scene_still_since (optional)
         output_ports:
         - eigenvalues
         - x
@@ -124,6 +127,12 @@ class CandidateIdentifiers(LeafSystem):
     ``depth_image`` (``ImageDepth32F``, m) and ``image_time`` (1, s), the features' frame's depth,
     against which the adopted tool point is checked every frame (``perception.free_space``; an
     image from another frame than the features', by ``image_time``, is not used).
+    ``scene_turn`` (``perception.camera_motion.SceneTurn``: connect a ``CameraMotionDetector``'s
+    ``scene_turn``; unconnected: none): with ``params.keep_tool_points``, the camera after a move
+    is the old one turned as the static scene shows, placed by the tool points
+    (``identification.candidates.step``). ``scene_still_since`` (1, s: a ``CameraMotionDetector``'s;
+    unconnected: inf): a scene judged still since before a reset says the camera did not move, and
+    the kept camera then leads with ``params.keep_camera_min_samples`` samples.
 
     Outputs, the same as a ``SustainableIdentifierSystem`` with ``EyeToHandFormulation`` so that a
     ``CoordinationStateMachine`` plugs in: the solution-derived ports are those of the *shown*
@@ -155,6 +164,8 @@ class CandidateIdentifiers(LeafSystem):
         self._reset = self.DeclareVectorInputPort("reset", 1)
         self._reference = self.DeclareVectorInputPort("reference_x", N_UNKNOWNS)
         self._sigma = self.DeclareVectorInputPort("allowable_error", 1)
+        self._turn = self.DeclareAbstractInputPort("scene_turn", AbstractValue.Make(SceneTurn()))
+        self._still = self.DeclareVectorInputPort("scene_still_since", 1)
         self._intrinsics = self._depth = self._time = None
         if camera_info is not None:
             self._intrinsics = intrinsics_from_camera_info(camera_info)
@@ -216,6 +227,8 @@ class CandidateIdentifiers(LeafSystem):
             self._X_WH.Eval(context).GetAsMatrix4(), features.time, features.ids, features.p_CP,
             features.valid, on_body, reference, self._formulation.forgetting_factor, in_body_cell, sigma,
             self._depth_gap(context, features.time),
+            self._turn.Eval(context) if self._turn.HasValue(context) else None,
+            float(self._still.Eval(context)[0]) if self._still.HasValue(context) else np.inf,
         )  # fmt: skip
         state.get_mutable_abstract_state(self._bank).set_value(new)
 

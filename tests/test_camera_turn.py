@@ -1,0 +1,233 @@
+"""A camera move re-found from what it left as it was (beyond the paper): the static scene's
+correspondences across the move (``perception.camera_motion``), the camera from them and the held
+tool's points (``eye_to_hand.camera_after_turn``), and the candidates adopting that camera after a
+camera move (``identification.candidates``, ``keep_tool_points``)."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from eye_to_hand_data import rotation_error_deg
+from scipy.spatial.transform import Rotation
+from test_candidates import CRITERIA, DT, HANDOVER, P_TOOL, TRUTH, hand_pose, seen
+
+from sustain_drake.identification import candidates
+from sustain_drake.identification.candidates import CandidateBank
+from sustain_drake.identification.eye_to_hand import build_A, camera_after_turn, pack_x
+from sustain_drake.identification.rotation import nearest_rotation
+from sustain_drake.perception import camera_motion
+from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState, SceneTurn
+from sustain_drake.perception.optical_flow import PinholeIntrinsics
+
+SIZE = (640, 480)
+INTRINSICS = PinholeIntrinsics(640, 480, 580.0, 580.0, 319.5, 239.5)
+# The 640 x 480 thresholds of diagrams/hand_eye.yaml.
+PARAMS = CameraMotionParams(move_px=6.0, inlier_px=2.0, still_px=1.0, feature_still_px=1.0, view_still_px=0.2)
+TURN = np.array([0.1, -0.15, 0.02])  # rad, about the camera's axes
+PIVOT_C = np.array([0.0, 0.04, -0.05])  # m: the head's axes pass 5 cm behind the optical centre
+
+
+def turned(X_WC, rotvec, pivot_C=PIVOT_C):
+    """The camera turned by ``rotvec`` (in C) about a point fixed in it: ``X_WC1``."""
+    R = Rotation.from_rotvec(rotvec).as_matrix()
+    X = np.eye(4)
+    X[:3, :3] = X_WC[:3, :3] @ R
+    X[:3, 3] = X_WC[:3, 3] + X_WC[:3, :3] @ (pivot_C - R @ pivot_C)
+    return X
+
+
+def static_scene(X_WC, n=120, seed=0):
+    """``n`` points in W seen by the camera at ``X_WC``, 1.5-4 m away, spread over the image."""
+    rng = np.random.default_rng(seed)
+    px = rng.uniform([60, 60], [580, 420], (n, 2))
+    z = rng.uniform(1.5, 4.0, n)
+    p_C = np.column_stack([(px[:, 0] - INTRINSICS.cx) * z / INTRINSICS.fx,
+                           (px[:, 1] - INTRINSICS.cy) * z / INTRINSICS.fy, z])
+    return p_C @ X_WC[:3, :3].T + X_WC[:3, 3]
+
+
+def view(X_WC, p_W, rng, pixel_noise=0.05, depth_noise=0.01):
+    """Pixels, points (depth noise: a fraction of the depth) and validity of ``p_W`` from ``X_WC``."""
+    p_C = (p_W - X_WC[:3, 3]) @ X_WC[:3, :3]
+    px = np.column_stack([INTRINSICS.fx * p_C[:, 0] / p_C[:, 2] + INTRINSICS.cx,
+                          INTRINSICS.fy * p_C[:, 1] / p_C[:, 2] + INTRINSICS.cy])
+    px += rng.normal(0, pixel_noise, px.shape)
+    p_CP = p_C * (1.0 + rng.normal(0, depth_noise, (len(p_C), 1)))
+    return px, p_CP, np.ones(len(p_C), bool)
+
+
+def camera_path(k, X0, still_before=40, moving=15):
+    """The camera at frame ``k``: still, then turning over ``moving`` frames, then still."""
+    s = float(np.clip((k - still_before + 1) / moving, 0.0, 1.0))
+    return turned(X0, s * TURN)
+
+
+def run_detector(frames, path, p_W, intrinsics=INTRINSICS, seed=1, appear=None):
+    """The detector's state after ``frames`` frames of the scene ``p_W`` seen along ``path``;
+    ``appear``: per point, the frame its track starts (default 0)."""
+    rng, state, previous = np.random.default_rng(seed), CameraMotionState(), None
+    appear = np.zeros(len(p_W), int) if appear is None else np.asarray(appear)
+    for k in range(frames):
+        px, p_CP, valid = view(path(k), p_W, rng)
+        flow = np.zeros_like(px) if previous is None else px - previous
+        flow[appear == k] = 0.0  # seeded in this frame
+        previous = px
+        on = appear <= k
+        state = camera_motion.step(state, k * DT, np.flatnonzero(on), px[on], flow[on],
+                                   np.zeros(on.sum(), bool), np.zeros(1, bool), PARAMS, SIZE, p_CP[on],
+                                   valid[on], intrinsics)  # fmt: skip
+    return state
+
+
+def bearing(p_C):
+    return p_C / np.linalg.norm(p_C, axis=-1, keepdims=True)
+
+
+def test_a_camera_move_gives_the_scene_correspondences_before_and_after():
+    X0 = TRUTH.X_WC
+    X1 = turned(X0, TURN)
+    p_W = static_scene(X0)
+    state = run_detector(75, lambda k: camera_path(k, X0), p_W)
+    turn = state.turn
+    # Every anchor but those the turn's perspective took off the similarity fit (inlier_px).
+    assert state.moves == 1 and turn.move == 1 and len(turn) >= 0.95 * len(p_W)
+    assert turn.start == pytest.approx(40 * DT) and 55 * DT < turn.time <= 70 * DT
+    # The bearings are the points' own (pixel noise 0.05 px averaged over the views: 0.1 px is 0.01 deg).
+    p_C0 = (p_W - X0[:3, 3]) @ X0[:3, :3]
+    p_C1 = (p_W - X1[:3, 3]) @ X1[:3, :3]
+    index = [int(np.argmin(np.linalg.norm(bearing(p_C0) - b, axis=1))) for b in turn.b0]
+    p_C0, p_C1 = p_C0[index], p_C1[index]
+    assert np.degrees(np.abs(np.arccos(np.clip(np.sum(turn.b0 * bearing(p_C0), 1), -1, 1)))).max() < 0.01
+    assert np.degrees(np.abs(np.arccos(np.clip(np.sum(turn.b1 * bearing(p_C1), 1), -1, 1)))).max() < 0.01
+    assert np.abs(turn.q0[:, 2] / p_C0[:, 2] - 1.0).max() < 0.02  # 1 % depth noise, averaged
+    # A long rest before the move: tracks that started 1 s before it count as much as the others
+    # (the view is of the last second), and none is left out.
+    appear = np.where(np.arange(len(p_W)) < 30, 170, 0)
+    state = run_detector(230, lambda k: camera_path(k, X0, still_before=200), p_W, appear=appear)
+    assert state.turn.move == 1 and len(state.turn) >= 0.95 * len(p_W)
+    # Without the intrinsics there is no turn (the move is still declared).
+    state = run_detector(75, lambda k: camera_path(k, X0), p_W, intrinsics=None)
+    assert state.moves == 1 and state.turn.move == 0
+    # A move that starts before the scene was at rest for turn_frames gives none either.
+    state = run_detector(60, lambda k: camera_path(k, X0, still_before=17), p_W)
+    assert state.moves == 1 and state.turn.move == 0
+
+
+def tool_statistic(X_WC, p_HP, n=30, seed=2, noise=0.5e-3):
+    """The raw statistic (16 x 16) of ``n`` samples of the hand point ``p_HP`` seen from ``X_WC``."""
+    rng, S = np.random.default_rng(seed), np.zeros((16, 16))
+    for k in range(n):
+        X_WH = hand_pose(k)
+        A = build_A(seen(X_WH, p_HP, rng, noise, X_WC), X_WH[:3, :3], X_WH[:3, 3])
+        S += A.T @ A
+    return S
+
+
+def scene_turn(X0, X1, p_W, seed=3, outliers=0):
+    """A ``SceneTurn`` of ``p_W`` from exact views (noise as in ``view``); ``outliers`` anchors
+    moved off the scene after the move (a feature of the arm)."""
+    rng = np.random.default_rng(seed)
+    px0, q0, _ = view(X0, p_W, rng)
+    px1, _, _ = view(X1, p_W, rng)
+    px1[:outliers] += rng.uniform(-40, 40, (outliers, 2))
+    return SceneTurn(1, 1.0, 0.5, camera_motion.bearings(px0, INTRINSICS), q0,
+                     camera_motion.bearings(px1, INTRINSICS))
+
+
+@pytest.mark.parametrize("outliers", [0, 30])
+def test_the_camera_after_a_turn_from_the_scene_and_the_tool_points(outliers):
+    """The far scene pins the turn and the tool points the position; alternating the two removes
+    the parallax of the camera's shift (8 mm here), which a turn-only fit takes for a rotation."""
+    X0 = TRUTH.X_WC
+    X1 = turned(X0, TURN)
+    turn = scene_turn(X0, X1, static_scene(X0), outliers=outliers)
+    p_HP = np.array([P_TOOL, P_TOOL + [0.03, -0.02, 0.04]])
+    S = [tool_statistic(X1, p, seed=k) for k, p in enumerate(p_HP)]
+    R, p, rms, n = camera_after_turn(X0[:3, :3], X0[:3, 3], turn.b0, turn.q0, turn.b1, S, p_HP)
+    assert rotation_error_deg(R, X1[:3, :3]) < 0.01
+    assert np.linalg.norm(p - X1[:3, 3]) < 0.5e-3
+    assert n >= 120 - outliers - 5 and rms < 1e-3
+    R1, _, _, _ = camera_after_turn(X0[:3, :3], X0[:3, 3], turn.b0, turn.q0, turn.b1, S, p_HP,
+                                     iterations=1)
+    assert rotation_error_deg(R1, X1[:3, :3]) > 0.05  # a turn-only fit: 0.16 deg
+    # The turn alone (no tool sample): the rotation, the position left where it was.
+    R2, p2, _, _ = camera_after_turn(X0[:3, :3], X0[:3, 3], turn.b0, turn.q0, turn.b1, [], [])
+    assert rotation_error_deg(R2, X1[:3, :3]) < 0.3 and np.array_equal(p2, X0[:3, 3])
+    # Too few anchors: no answer.
+    assert camera_after_turn(X0[:3, :3], X0[:3, 3], turn.b0[:5], turn.q0[:5], turn.b1[:5], S, p_HP) is None
+
+
+def test_nearest_rotation_is_a_proper_rotation():
+    R = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()
+    assert np.allclose(nearest_rotation(2.0 * R + 1e-9), R)
+    reflected = nearest_rotation(np.diag([1.0, 1.0, -1.0]))  # no reflection, ever
+    assert np.linalg.det(reflected) == pytest.approx(1.0)
+
+
+POINTS = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05]}
+
+
+def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399 * DT, 404 * DT),
+                  resets=(400,)):  # fmt: skip
+    """Three tool points observed under the true model; at frame 400 the head turns (``TURN`` about
+    ``PIVOT_C``: 10 deg, 8 mm) and the state machine resets with the model cleared. Every track ends
+    at the turn: the same points come back as new tracks (ids + 100), or ``new_points`` instead.
+    ``turn_of(X0, X1)``: the scene turn given from frame 405 on, its episode over ``window`` (s;
+    None: no turn); the state machine's reset counts up at each frame of ``resets``. Returns the bank
+    and the frame of the first adoption after the move (None)."""
+    X1 = turned(TRUTH.X_WC, TURN)
+    bank, rng = CandidateBank(), np.random.default_rng(3)
+    turn = None if turn_of is None else turn_of(TRUTH.X_WC, X1)
+    for k in range(frames):
+        X = hand_pose(k)
+        after = k >= 400
+        points = (new_points or {i + 100: p for i, p in POINTS.items()}) if after else POINTS
+        X_WC = X1 if after else TRUTH.X_WC
+        p = [seen(X, points[i], rng, X_WC=X_WC) for i in points]
+        adopted = (None if after or bank.leader < 0
+                   else pack_x(X_WC[:3, :3], X_WC[:3, 3], points[bank.leader]))
+        given = turn if k >= 405 else None
+        if given is not None:
+            given = replace(given, start=window[0], time=window[1])
+        reset = float(sum(k >= r for r in resets))
+        bank = candidates.step(bank, params, CRITERIA, k * DT, reset, X, k * DT,
+                               np.array(list(points)), np.array(p), np.ones(len(p), bool),
+                               np.ones(len(p), bool), adopted,
+                               allowable_error=1e-4, scene_turn=given)  # fmt: skip
+        if after and bank.leader >= 0:
+            return bank, k
+    return bank, None
+
+
+def test_after_a_head_turn_the_scene_and_the_tool_points_give_the_camera_at_once():
+    """``keep_tool_points`` with the scene's turn: no track outlives the turn, so the kept points'
+    ids say nothing; the new tracks are the known points whose ``p_HP`` they have under the turned
+    camera, and ``turn_min_samples`` samples of them place it: adopted 0.5 s after the turn
+    (the full identification of all 16 unknowns takes seconds more)."""
+    params = replace(HANDOVER, max_observers=3, keep_tool_points=True, min_rotation_spread=0.05)
+    X1 = turned(TRUTH.X_WC, TURN)
+    bank, k = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)))
+    adoption = bank.adoptions[-1]
+    assert adoption.kind == "scene turn, tool points kept"
+    assert k - 400 < 30 and k - 400 >= params.turn_min_samples - 1
+    assert np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 1e-3
+    assert rotation_error_deg(adoption.estimate.R_WC, X1[:3, :3]) < 0.02
+    assert np.linalg.norm(adoption.estimate.x[12:15] - POINTS[adoption.feature_id - 100]) < 1e-6
+    # The state machine resets again while the camera still moves (no model to clear then): the
+    # camera before the move is kept for its turn (the tracks start again at the second reset).
+    bank, k_again = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)),
+                                  resets=(400, 403))  # fmt: skip
+    assert k_again == k + 3 and bank.adoptions[-1].kind == "scene turn, tool points kept"
+    # Without the scene's turn: the full identification, later.
+    bank, k_paper = run_head_turn(params)
+    assert bank.adoptions[-1].kind.startswith("identified") and k_paper > k + 60
+    # New tracks that are none of the known points (each 2 cm off its own way: no common shift of
+    # the camera explains two of them): no camera from the turn.
+    others = {104: POINTS[4] + [0.02, 0.0, 0.0], 105: POINTS[5] + [0.0, -0.02, 0.0],
+              109: P_TOOL + [0.0, 0.0, 0.02]}
+    bank, k_other = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)), others)
+    assert k_other is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
+    # A turn from another move (it ended before the reset) is not used.
+    bank, k_stale = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)),
+                                  frames=460, window=(300 * DT, 350 * DT))  # fmt: skip
+    assert k_stale is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
