@@ -168,20 +168,23 @@ POINTS = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, 
 
 
 def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399 * DT, 404 * DT),
-                  resets=(400,)):  # fmt: skip
+                  resets=(400,), ended=None):  # fmt: skip
     """Three tool points observed under the true model; at frame 400 the head turns (``TURN`` about
     ``PIVOT_C``: 10 deg, 8 mm) and the state machine resets with the model cleared. Every track ends
     at the turn: the same points come back as new tracks (ids + 100), or ``new_points`` instead.
     ``turn_of(X0, X1)``: the scene turn given from frame 405 on, its episode over ``window`` (s;
-    None: no turn); the state machine's reset counts up at each frame of ``resets``. Returns the bank
-    and the frame of the first adoption after the move (None)."""
+    None: no turn); the state machine's reset counts up at each frame of ``resets``; ``ended``: more
+    points of the hand, tracked only over frames 100-300 before the move. Returns the bank and the
+    frame of the first adoption after the move (None)."""
     X1 = turned(TRUTH.X_WC, TURN)
     bank, rng = CandidateBank(), np.random.default_rng(3)
     turn = None if turn_of is None else turn_of(TRUTH.X_WC, X1)
     for k in range(frames):
         X = hand_pose(k)
         after = k >= 400
-        points = (new_points or {i + 100: p for i, p in POINTS.items()}) if after else POINTS
+        points = (new_points or {i + 100: p for i, p in POINTS.items()}) if after else dict(POINTS)
+        if not after and 100 <= k < 300:
+            points.update(ended or {})
         X_WC = X1 if after else TRUTH.X_WC
         p = [seen(X, points[i], rng, X_WC=X_WC) for i in points]
         adopted = (None if after or bank.leader < 0
@@ -231,3 +234,18 @@ def test_after_a_head_turn_the_scene_and_the_tool_points_give_the_camera_at_once
     bank, k_stale = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)),
                                   frames=460, window=(300 * DT, 350 * DT))  # fmt: skip
     assert k_stale is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
+
+
+def test_marks_whose_tracks_ended_before_the_turn_are_found_again():
+    """The known points include the archived candidates the model explained (their tracks ended
+    before the move: marks out of view then): new tracks of two such marks alone, after the turn,
+    place the camera."""
+    params = replace(HANDOVER, max_observers=3, keep_tool_points=True, min_rotation_spread=0.05, joint=True)
+    ended = {2: P_TOOL + [0.05, 0.03, -0.02], 3: P_TOOL + [-0.03, 0.06, 0.03]}
+    X1 = turned(TRUTH.X_WC, TURN)
+    bank, k = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)),
+                            new_points={102: ended[2], 103: ended[3]}, ended=ended)
+    adoption = bank.adoptions[-1]
+    assert adoption.kind == "scene turn, tool points kept" and k - 400 < 30
+    assert np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 1e-3
+    assert rotation_error_deg(adoption.estimate.R_WC, X1[:3, :3]) < 0.02

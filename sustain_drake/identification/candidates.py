@@ -184,8 +184,9 @@ class CandidateParams:
             turn ended the old one), if the hand turned ``min_rotation_spread`` over its samples,
             is the known point nearest its best ``p_HP`` under the turned camera at the old
             position, less the offset that the camera's shift (unknown, up to ``turn_max_shift``,
-            m) gives every track alike, within ``turn_radius`` (m; the only one within twice that:
-            the rod's marks lie 15-20 mm apart). The offset is the tracked-through points' own, or
+            m) gives every track alike, within ``turn_radius`` (m; the only mark within twice that,
+            known points within ``turn_radius`` of each other being tracks of one mark: the rod's
+            marks lie 15-20 mm apart). The offset is the tracked-through points' own, or
             the one that most new tracks (at least two) agree on (``_common_offset``). The points
             must fit the camera within ``observe_consistency`` of the adopted RMS error, as above.
         min_point_spread: m, how far the known points' samples must lie from a line in the camera
@@ -799,16 +800,19 @@ def _with_camera(c: Candidate, x_previous: np.ndarray, p_HP: np.ndarray, mse: fl
 def _model_points(bank: CandidateBank, params: CandidateParams) -> tuple:
     """``(feature_id, p_HP)`` of every point the adopted model holds (``keep_tool_points``): the
     leader first (the adopted tool point), the observed point, the witness, the observers, then
-    every other candidate the model's camera explains (``_explained``, with ``observe_min_samples``
-    samples and ``min_rotation_spread``) with its best ``p_HP`` under that camera: points of the
-    hand as well as of the tool, all fixed in H, and the more of them, the more spread."""
+    every other candidate, tracked or archived (its track ended: a mark out of view now, which a
+    new track may find again after the move), that the model's camera explains (``_explained``,
+    with ``observe_min_samples`` samples and ``min_rotation_spread``) with its best ``p_HP`` under
+    that camera: points of the hand as well as of the tool, all fixed in H, and the more of them,
+    the more spread."""
     x = bank.model_x
     anchor = x[12:15].copy()
     points = [(bank.leader, anchor),
               (bank.observed, anchor if bank.observed_p_HP is None else bank.observed_p_HP),
               (bank.witness, bank.witness_p_HP)] + [(o[0], o[1]) for o in bank.observers]
     R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
-    points += [(c.feature_id, best_p_HP_given_camera(c.statistic, R_WC, p_WC)) for c in bank.candidates
+    points += [(c.feature_id, best_p_HP_given_camera(c.statistic, R_WC, p_WC))
+               for c in bank.candidates + bank.archive
                if c.solution.num_samples >= params.observe_min_samples
                and rotation_spread(c.statistic) >= params.min_rotation_spread
                and _explained(c, x, bank.adopted_mse, params)]
@@ -888,10 +892,11 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     if offset is not None:
         for c, guess in zip(new, guesses, strict=True):
             distance = np.linalg.norm(known_p - (guess - offset), axis=1)
-            nearest = np.argsort(distance)[:2]
-            if distance[nearest[0]] <= params.turn_radius and (
-                    nearest.size < 2 or distance[nearest[1]] > 2.0 * params.turn_radius):
-                pairs.append((c, known_p[nearest[0]]))
+            j = int(np.argmin(distance))
+            # The nearest other mark (known points within turn_radius of it are tracks of it).
+            others = distance[np.linalg.norm(known_p - known_p[j], axis=1) > params.turn_radius]
+            if distance[j] <= params.turn_radius and not np.any(others <= 2.0 * params.turn_radius):
+                pairs.append((c, known_p[j]))
     fit = _fit_dropping_misfits(pairs, lambda ps: camera_after_turn(
         R_WC0, p_WC0, turn.b0, turn.q0, turn.b1, [_S(c.statistic) for c, _ in ps],
         np.array([p for _, p in ps])), params.observe_consistency**2 * bank.adopted_mse)  # fmt: skip
