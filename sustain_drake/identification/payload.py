@@ -118,7 +118,9 @@ class PayloadIdentifier(FormulationIdentifier):
 
     def add(self, wrench_K: np.ndarray, R_WK: np.ndarray) -> None:
         """Adds one quasi-static sample: the wrench ``[tau_K; f_K]`` and the sensor orientation."""
-        self._core.add(build_A(wrench_K, R_WK, self.g_W, self._A))
+        with np.errstate(invalid="ignore", over="ignore"):  # an absurd wrench: the core refuses its A
+            A = build_A(wrench_K, R_WK, self.g_W, self._A)
+        self._core.add(A)
 
     def sample_error(self, wrench_K: np.ndarray, R_WK: np.ndarray, x: np.ndarray) -> float:
         """``s_t = ||A_t x||^2`` (Eq. (2)) for a new sample under the estimate ``x``."""
