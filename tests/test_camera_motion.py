@@ -162,6 +162,10 @@ def test_bad_input_and_parameters():
     with pytest.raises(ValueError, match="one per feature"):
         camera_motion.step(CameraMotionState(), 0.0, np.arange(3), np.zeros((3, 2)), np.zeros((2, 2)),
                            np.zeros(3, bool), False, PARAMS, SIZE)  # fmt: skip
+    with pytest.raises(ValueError, match="2 points, 3 valid flags"):
+        camera_motion.step(CameraMotionState(), 0.0, np.arange(3), np.zeros((3, 2)), np.zeros((3, 2)),
+                           np.zeros(3, bool), False, PARAMS, SIZE, np.zeros((2, 3)),
+                           np.ones(3, bool))  # fmt: skip
     # A frame not newer than the last is skipped.
     state = camera_motion.step(CameraMotionState(), 1.0, np.arange(3), np.zeros((3, 2)), np.zeros((3, 2)),
                                np.zeros(3, bool), False, PARAMS, SIZE)  # fmt: skip

@@ -230,6 +230,13 @@ def test_after_a_head_turn_the_scene_and_the_tool_points_give_the_camera_at_once
               109: P_TOOL + [0.0, 0.0, 0.02]}
     bank, k_other = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)), others)
     assert k_other is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
+    # A turn with too few anchors (5 of the 10 camera_after_turn needs) gives no camera.
+    def few(X0, X1):
+        turn = scene_turn(X0, X1, static_scene(X0))
+        return replace(turn, b0=turn.b0[:5], q0=turn.q0[:5], b1=turn.b1[:5])
+
+    bank, k_few = run_head_turn(params, few, frames=460)
+    assert k_few is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
     # A turn from another move (it ended before the reset) is not used.
     bank, k_stale = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)),
                                   frames=460, window=(300 * DT, 350 * DT))  # fmt: skip

@@ -168,12 +168,13 @@ class CandidateParams:
             puts it (0: off; the system needs the depth image).
         keep_tool_points: after a reset that cleared the model (the state machine does so when the
             camera moved), the points the abandoned model held (``_model_points``: the observed
-            point, its witness, the observers and every candidate its camera explains, each with
-            its ``p_HP``) keep their ``p_HP``: a moved camera leaves the held tool as it was. Their
-            tracks that outlive the move give, once each has ``observe_min_samples`` samples, the
-            new camera in closed form (``camera_given_points``: 6 unknowns, not 15); it leads when
-            they fit it within ``observe_consistency`` of the adopted RMS error (the worst misfit
-            left out until they do, while more than half remain) and their camera-frame points spread at least
+            point, its witness, the observers and every candidate, tracked or archived, its camera
+            explains, each with its ``p_HP``) keep their ``p_HP``: a moved camera leaves the held
+            tool as it was. Their tracks that outlive the move give, once each has
+            ``observe_min_samples`` samples, the new camera in closed form
+            (``camera_given_points``: 6 unknowns, not 15); it leads when they fit it within
+            ``observe_consistency`` of the adopted RMS error (the worst misfit left out until they
+            do, while more than half remain) and their camera-frame points spread at least
             ``min_point_spread`` off a line. Beyond the paper, which identifies everything again
             (False: the paper's).
         turn_radius, turn_max_shift, turn_min_samples: ``keep_tool_points`` with the static
@@ -340,6 +341,7 @@ class CandidateBank:
     moved_from_x: np.ndarray | None = None  # the model a camera move cleared (keep_tool_points)
     moved_at: float = math.nan  # s, when that reset came
     turn: object | None = None  # the static scene's turn across that move (``step``'s scene_turn)
+    turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
     reset_time: float = -math.inf  # s, when the last reset came
 
     def find(self, feature_id: int) -> Candidate | None:
@@ -464,7 +466,7 @@ def step(
             moved_from, moved_at = None, math.nan
         bank = replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
                        known_points=known, model_x=None, moved_from_x=moved_from, moved_at=moved_at,
-                       turn=None, reset_time=float(time),
+                       turn=None, turned_R_WC=None, reset_time=float(time),
                        last_reset=float(reset), round_start=math.nan,
                        observed_last=None, observed_p_HP=None,
                        witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
@@ -472,7 +474,12 @@ def step(
     bank = record_pose(bank, time, X_WH)
     if (scene_turn is not None and bank.moved_from_x is not None and bank.turn is None and scene_turn.move > 0
             and scene_turn.start <= bank.moved_at <= scene_turn.time):
-        bank = replace(bank, turn=scene_turn)  # the turn of the move that cleared the model
+        # The turn of the move that cleared the model; the turned camera (at the old position) once,
+        # to match new tracks to the known points on every frame until one leads.
+        x0 = bank.moved_from_x
+        turned = camera_after_turn(x0[0:9].reshape(3, 3, order="F"), x0[9:12], scene_turn.b0, scene_turn.q0,
+                                   scene_turn.b1, [], [])
+        bank = replace(bank, turn=scene_turn, turned_R_WC=None if turned is None else turned[0])
     if bank.leader >= 0 and x_is_set(reference_x):
         bank = replace(bank, model_x=np.array(reference_x, dtype=float))
     if not frame_time > bank.last_frame:
@@ -872,12 +879,11 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     known point, by id (tracked through the move) or by ``p_HP`` (``turn_radius``, see
     ``CandidateParams``), fitted with ``_fit_dropping_misfits``. Returns ``(x, mse, feature_id)``
     as ``_camera_from_known_points`` or None."""
+    if bank.turned_R_WC is None:
+        return None  # too few anchors in the turn
     known = dict(bank.known_points)
-    x0, turn = bank.moved_from_x, bank.turn
+    x0, turn, R_turned = bank.moved_from_x, bank.turn, bank.turned_R_WC
     R_WC0, p_WC0 = x0[0:9].reshape(3, 3, order="F"), x0[9:12]
-    turned = camera_after_turn(R_WC0, p_WC0, turn.b0, turn.q0, turn.b1, [], [])
-    if turned is None:
-        return None
     known_p = np.array(list(known.values()))
     ready = [c for c in kept if c.solution.num_samples >= params.turn_min_samples]
     pairs = [(c, known[c.feature_id]) for c in ready if c.feature_id in known]
@@ -886,8 +892,8 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     # time), so the shift is the offset most new tracks agree on.
     new = [c for c in ready if c.feature_id not in known
            and rotation_spread(c.statistic) >= params.min_rotation_spread]  # else a point of any link fits
-    guesses = np.array([best_p_HP_given_camera(c.statistic, turned[0], p_WC0) for c in new]).reshape(-1, 3)
-    tracked = [best_p_HP_given_camera(c.statistic, turned[0], p_WC0) - p for c, p in pairs]
+    guesses = np.array([best_p_HP_given_camera(c.statistic, R_turned, p_WC0) for c in new]).reshape(-1, 3)
+    tracked = [best_p_HP_given_camera(c.statistic, R_turned, p_WC0) - p for c, p in pairs]
     offset = _common_offset(guesses, known_p, tracked, params)
     if offset is not None:
         for c, guess in zip(new, guesses, strict=True):

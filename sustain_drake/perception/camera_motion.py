@@ -345,6 +345,11 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
     if not (p_px.shape[0] == flow_px.shape[0] == robot.shape[0] == ids.shape[0]):
         raise ValueError(f"camera motion: {ids.shape[0]} ids, {p_px.shape[0]} pixels, "
                          f"{flow_px.shape[0]} flows, {robot.shape[0]} robot flags: one per feature expected")
+    if p_CP is not None and valid is not None:
+        p_CP, valid = np.asarray(p_CP, float).reshape(-1, 3), np.asarray(valid, bool).ravel()
+        if not (p_CP.shape[0] == valid.shape[0] == ids.shape[0]):
+            raise ValueError(f"camera motion: {ids.shape[0]} ids, {p_CP.shape[0]} points, {valid.shape[0]} "
+                             "valid flags: one per feature expected")
     points = reference_points(*image_size)
     arm_moving = bool(np.any(joints_moving))
     if arm_moving:
@@ -406,9 +411,8 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
         members = anchors
         if new.view_before is not None:
             members = anchors | (np.isin(ids, new.view_before.ids) & finite & ~robot)
-        new = replace(new, view=add_to_view(new.view, ids[members], p_px[members],
-                                            np.asarray(p_CP, float).reshape(-1, 3)[members],
-                                            np.asarray(valid, bool).ravel()[members]))
+        new = replace(new, view=add_to_view(new.view, ids[members], p_px[members], p_CP[members],
+                                            valid[members]))
         if new.view_before is not None and new.view.frames >= params.turn_frames:
             if new.declared:  # a camera move (not a glitch): its turn
                 new = replace(new, turn=scene_turn(new.view_before, new.view, intrinsics, new.moves,
