@@ -161,6 +161,8 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         if perception.confirm:  # the detector's confirming requests first (body detection, §3.3)
             builder.Connect(detector.GetOutputPort("confirm"), motion.GetInputPort("detector_confirm"))
         builder.Connect(machine.GetOutputPort("mode"), motion.GetInputPort("mode"))
+        # Points converged whose views do not pin the camera's rotation: far postures now.
+        builder.Connect(candidates.GetOutputPort("more_motion"), motion.GetInputPort("more_motion"))
     return HandEyeLoop(tracker, detector, candidates, machine, refiner, camera, motion)
 
 

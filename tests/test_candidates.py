@@ -43,12 +43,12 @@ def other_link(X_WH, k, p_LQ):
 
 
 def run(frames, bank=None, reset=0.0, reference=None, start=0, params=PARAMS,
-        scene_still_since=math.inf):  # fmt: skip
-    """frames(k, X_WH, rng) -> (ids, p_CP, valid, on_body); one frame per tick."""
+        scene_still_since=math.inf, pose=hand_pose):  # fmt: skip
+    """frames(k, X_WH, rng) -> (ids, p_CP, valid, on_body); one frame per tick; the hand at pose(k)."""
     bank = CandidateBank() if bank is None else bank
     rng = np.random.default_rng(3)
     for k in range(start, start + 10_000):
-        X = hand_pose(k)
+        X = pose(k)
         out = frames(k, X, rng)
         if out is None:
             return bank, k
@@ -500,9 +500,9 @@ def test_stitching_tracks_of_one_point_pins_the_camera_and_keeps_other_marks_apa
               weak_track(4, p_other, [0.4, 0.0, 0.0], 0.02, rng)]
     errors = {}
     for radius in (0.0, 0.005):
-        best, num_tracks = candidates._joint_refined(leader, tracks, [], CandidateParams(joint=True,
-                                                                                        stitch_radius=radius))
-        assert num_tracks == 4
+        best, points = candidates._joint_refined(leader, tracks, [], CandidateParams(joint=True,
+                                                                                    stitch_radius=radius))
+        assert len(points) == (4 if radius == 0 else 2)  # stitched: the tracks of P_TOOL are one point
         est = best.solution.estimate
         errors[radius] = (np.linalg.norm(est.p_WC - TRUTH.X_WC[:3, 3]), np.linalg.norm(est.p_HP - P_TOOL))
     assert errors[0.0][0] > 1.5e-3 and errors[0.0][1] > 1.5e-3  # one point per track: the trade-off
@@ -691,3 +691,64 @@ def test_a_kept_camera_keeps_the_allowable_error_of_its_identification(keep):
         assert expected == identified
     else:
         assert expected == pytest.approx(own, rel=1e-6)
+
+
+def test_a_held_view_is_one_sample_with_min_view_change():
+    """``min_view_change``: the arm holds one posture for 10 s (300 frames) where the point's
+    measurement is 3 mm off (the same view, the same error, as a rendered mark's), between two
+    seconds of rich motion. Every frame a sample: the held view outweighs the motion and pulls
+    the camera; a sample only when the point moved 2 mm since the last: the held view is one
+    sample and the camera is several times nearer the truth."""
+    def pose(k):
+        return hand_pose(k if k < 60 else 60 if k < 360 else k - 300)
+
+    def frames(k, X, rng):
+        if k >= 420:
+            return None
+        error = np.array([0.003, 0.0, 0.0]) if 60 <= k < 360 else np.zeros(3)
+        return [5], [seen(X, P_TOOL, rng, noise=1e-4) + error], [True], [True]
+
+    errors, counts = {}, {}
+    for d in (0.0, 0.002):
+        params = replace(PARAMS, min_view_change=d, max_unconverged_time=100.0)
+        bank, _ = run(frames, params=params, pose=pose)
+        c = bank.find(5)
+        est = candidates._identifier(c, CRITERIA, 1.0).solve(refine_estimate=True).estimate
+        errors[d] = np.linalg.norm(est.p_WC - TRUTH.X_WC[:3, 3])
+        counts[d] = c.solution.num_samples
+    assert counts[0.0] == 420 and 20 <= counts[0.002] <= 122  # at most the 120 moving frames and one held
+    assert errors[0.002] < errors[0.0] / 3
+
+
+def test_a_camera_the_views_do_not_pin_waits_for_more_motion():
+    """``min_rotation_lever``: the leader's camera is adopted only once its points' views pin the
+    camera's rotation (``smallest_rotation_lever``); until then no leader and ``more_motion``. The
+    hand turns within 0.05 rad and moves within 2 cm for 10 s, then moves richly."""
+    def pose(k):
+        if k >= 300:
+            return hand_pose(k)
+        X = hand_pose(k)
+        X[:3, :3] = Rotation.from_rotvec(0.1 * Rotation.from_matrix(X[:3, :3]).as_rotvec()).as_matrix()
+        X[:3, 3] = hand_pose(0)[:3, 3] + 0.2 * (X[:3, 3] - hand_pose(0)[:3, 3])
+        return X
+
+    def frames(k, X, rng):
+        if k >= 600:
+            return None
+        p_CP = [seen(X, P_TOOL, rng, noise=1e-5), seen(X, P_TOOL + [0.0, 0.02, 0.05], rng, noise=1e-5)]
+        return [4, 5], p_CP, [True, True], [True, True]
+
+    free, _ = run(frames, params=replace(PARAMS, joint=True), pose=pose)
+    early = free.adoptions[0]
+    assert early.time < 300 * DT and early.rotation_lever < 0.01
+    params = replace(PARAMS, joint=True, min_rotation_lever=0.02)
+    held_back, k = [], 0
+    bank = CandidateBank()
+    for stop in range(60, 601, 60):  # the bank every 2 s
+        bank, k = run(lambda j, X, rng, stop=stop: frames(j, X, rng) if j < stop else None, bank=bank,
+                      start=k, params=params, pose=pose)
+        held_back.append((stop, bank.leader, bank.more_motion))
+    late = bank.adoptions[0]
+    assert late.time > 300 * DT and late.rotation_lever >= 0.02
+    assert any(more and leader < 0 for stop, leader, more in held_back if stop <= 300)
+    assert not bank.more_motion

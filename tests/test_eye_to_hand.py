@@ -23,6 +23,7 @@ from sustain_drake.identification.eye_to_hand import (
     conditioning_transform,
     pack_x,
     refine_joint,
+    rotation_levers,
 )
 from sustain_drake.identification.rotation import project_to_rotation
 
@@ -251,6 +252,51 @@ def test_joint_refinement_equals_least_squares_over_every_points_samples():
     joint_error = rotation_error_deg(R, truth.X_WC[:3, :3])
     assert joint_error < min(rotation_error_deg(e.R_WC, truth.X_WC[:3, :3]) for e in singles)
     assert refine_joint([np.zeros((16, 16))] * 2, first.R_WC, first.p_WC, np.zeros((2, 3))) is None
+
+
+def test_rotation_levers_are_what_a_turned_camera_costs_once_the_rest_is_refitted():
+    """``rotation_levers``: a camera turned by ``delta`` about an axis ``a`` fits the samples, with
+    its position and every point's ``p_HP`` refitted (linear least squares), to an RMS of
+    ``delta`` times the lever along ``a``: the smallest lever is the least RMS over every axis,
+    the largest the most. Two points over narrow hand rotations (0.05 rad: small levers) and over
+    wide ones (0.5 rad)."""
+    truth = make_truth(31)
+    R_WC, p_WC = truth.X_WC[:3, :3], truth.X_WC[:3, 3]
+    points = [truth.p_HP, truth.p_HP + [0.03, 0.1, -0.05]]
+    rng = np.random.default_rng(32)
+    levers = {}
+    for wobble in (0.05, 0.5):
+        data, S_list = [], []
+        for p_HP in points:
+            X_WH = np.tile(np.eye(4), (100, 1, 1))
+            X_WH[:, :3, :3] = Rotation.from_rotvec(rng.normal(0, wobble, (100, 3))).as_matrix()
+            X_WH[:, :3, 3] = rng.uniform(-0.05, 0.05, (100, 3)) + [0.4, 0.0, 0.3]
+            p_C = (np.einsum("nij,j->ni", X_WH[:, :3, :3], p_HP) + X_WH[:, :3, 3] - p_WC) @ R_WC
+            S_list.append(sum(build_A(c, X[:3, :3], X[:3, 3]).T @ build_A(c, X[:3, :3], X[:3, 3])
+                              for c, X in zip(p_C, X_WH, strict=True)))
+            data.append((p_C, X_WH))
+        L = rotation_levers(S_list, R_WC, p_WC, np.array(points))
+        assert np.all(np.diff(L) >= 0) and L[0] > 0
+
+        def rms_turned(axis, data=data, delta=1e-4):
+            R = R_WC @ Rotation.from_rotvec(delta * axis).as_matrix()
+            rows, rhs = [], []  # R p_C + p_WC - R_WH p_HP_k = p_WH, unknowns (p_WC, p_HP_1, p_HP_2)
+            for k, (p_C, X_WH) in enumerate(data):
+                for c, X in zip(p_C, X_WH, strict=True):
+                    row = np.zeros((3, 9))
+                    row[:, 0:3], row[:, 3 + 3 * k: 6 + 3 * k] = np.eye(3), -X[:3, :3]
+                    rows.append(row)
+                    rhs.append(X[:3, 3] - R @ c)
+            A, b = np.vstack(rows), np.concatenate(rhs)
+            r = A @ np.linalg.lstsq(A, b, rcond=None)[0] - b
+            return math.sqrt(r @ r / (len(b) / 3)) / delta
+
+        axes = Rotation.random(300, random_state=33).as_rotvec()
+        measured = [rms_turned(a / np.linalg.norm(a)) for a in axes]
+        assert L[0] * 0.999 <= min(measured) <= L[0] * 1.05 and L[2] * 0.95 <= max(measured) <= L[2] * 1.001
+        levers[wobble] = L
+    assert levers[0.5][0] > 2 * levers[0.05][0]  # wide hand rotations pin the camera's rotation better
+    assert np.all(rotation_levers([np.zeros((16, 16))], R_WC, p_WC, points[:1]) == 0)  # no samples
 
 
 def test_camera_given_points_equals_least_squares_with_the_points_fixed():

@@ -82,7 +82,16 @@ def test_a_far_posture_when_the_detector_holds_the_arm_near_one_posture():
     assert own == [] and len(forwarded) == 19  # every request after the first tick's
 
 
-def _chatty_detector(observed_before):
+def test_a_far_posture_before_any_convergence_when_the_identifiers_ask_for_more_motion():
+    """``more_motion`` (the candidates converged but their views do not pin the camera's rotation
+    yet): the same far postures as after a convergence, before any."""
+    new, own, forwarded = _chatty_detector(observed_before=0.0, more_motion=1.0)
+    assert own == pytest.approx([4.3, 9.7], abs=0.15)
+    new, own, forwarded = _chatty_detector(observed_before=0.0, more_motion=0.0)
+    assert own == []
+
+
+def _chatty_detector(observed_before, more_motion=None):
     """The requests made over 10 s (time, joint), the own ones' and the detector's times."""
     builder = DiagramBuilder()
     scripted = builder.AddSystem(Scripted(t_observe=np.inf, t_request=np.inf, observe=(0.1, observed_before)))
@@ -95,6 +104,9 @@ def _chatty_detector(observed_before):
     builder.Connect(motion.GetOutputPort("confirm"), posture.get_input_port())
     builder.Connect(posture.get_output_port(), arm.get_input_port())
     builder.Connect(arm.get_output_port(), motion.GetInputPort("joint_positions"))
+    if more_motion is not None:
+        more = builder.AddSystem(ConstantVectorSource([more_motion]))
+        builder.Connect(more.get_output_port(), motion.GetInputPort("more_motion"))
     simulator = Simulator(builder.Build())
     joints = []
     for t in np.arange(0.1, 10.0 + 1e-9, 0.1):

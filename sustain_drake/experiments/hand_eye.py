@@ -234,6 +234,8 @@ def evaluate(handle, diagram, context) -> dict:
             "tool_point_error_mm": 1e3 * float(np.linalg.norm(est.p_HP - p_true)),
             "tool_point_distance_to_rod_tip_mm": 1e3 * float(np.linalg.norm(est.p_HP - rod_tip)),
             "expected_rms_mm": 1e3 * math.sqrt(max(est.mean_squared_error, 0.0)),
+            # How well the points' views pinned the camera's rotation (identified adoptions only).
+            "rotation_lever_mm": 1e3 * a.rotation_lever if math.isfinite(a.rotation_lever) else None,
             # The adopted point's own identification (the paper's one point), beside the adopted
             # estimate (whose camera may be refined with other points: CandidateParams.joint).
             **_single_point_errors(identifier, X_WC),

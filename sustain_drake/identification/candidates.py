@@ -55,6 +55,7 @@ from sustain_drake.identification.eye_to_hand import (
     camera_given_points,
     pack_x,
     refine_joint,
+    rotation_levers,
 )
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.identification.sustainable_identifier import (
@@ -196,6 +197,17 @@ class CandidateParams:
             over the spread (the noise alone: the noise over the spread and the root of the number
             of samples). At 3 cm the hand-eye runs had 0.11-0.26 degree; 6 cm halves that, and
             when the spread takes longer the full identification comes first.
+        min_view_change: m; > 0: a candidate takes a sample only when its point moved at least
+            this far in the camera frame since its last sample (``_new_view``; 0: every frame, the
+            paper's). A point's measurement errors repeat with its view, so Eq. (1)'s sum over
+            frames weighs each view by how long the arm held it (the detector's confirming trials
+            and the pause after a convergence hold it for seconds) and the camera leans towards
+            the held views. Every sample count (``min_samples`` and the counts above) then counts
+            views.
+        min_rotation_lever: m; > 0: a converged leader is adopted only when its points' views pin
+            the camera's rotation: the smallest of their ``eye_to_hand.rotation_levers`` (with the
+            joint refinement's points) at least this (0: no such test, the paper's rule).
+            Otherwise it waits for more of the motion (``CandidateBank.more_motion``).
     """
 
     max_candidates: int = 8
@@ -232,6 +244,8 @@ class CandidateParams:
     turn_radius: float = 0.004
     turn_max_shift: float = 0.03
     turn_min_samples: int = 15
+    min_view_change: float = 0.0
+    min_rotation_lever: float = 0.0
 
     def __post_init__(self):
         counts = (self.observe_min_samples, self.keep_camera_min_samples, self.primary_failures,
@@ -248,7 +262,7 @@ class CandidateParams:
             raise ValueError(f"observe_radius must be positive, got {self.observe_radius}")
         if not (self.stitch_radius >= 0 and math.isfinite(self.stitch_radius)):
             raise ValueError(f"stitch_radius must be >= 0, got {self.stitch_radius}")
-        for name in ("refine_interval", "free_space_radius"):
+        for name in ("refine_interval", "free_space_radius", "min_view_change", "min_rotation_lever"):
             value = getattr(self, name)
             if not (value >= 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be >= 0, got {value}")
@@ -272,6 +286,7 @@ class Candidate:
     last_p_CP: np.ndarray | None = None  # the last measured point (accepted or not), for the gate
     last_X_WH: np.ndarray | None = None
     verified_samples: int = 0  # its samples taken up to the last frame the adopted model was verified
+    sampled_p_CP: np.ndarray | None = None  # the point of its last sample (``min_view_change``)
 
 
 @dataclass(frozen=True)
@@ -288,6 +303,7 @@ class Adoption:
     round_start: float  # s, when the first candidate of this identification round was admitted
     estimate: EyeToHandEstimate | None = None
     kind: str = "identified"
+    rotation_lever: float = math.nan  # m, the smallest (``smallest_rotation_lever``) when identified
 
 
 @dataclass(frozen=True)
@@ -343,6 +359,7 @@ class CandidateBank:
     turn: object | None = None  # the static scene's turn across that move (``step``'s scene_turn)
     turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
     reset_time: float = -math.inf  # s, when the last reset came
+    more_motion: bool = False  # a leader held back (``min_rotation_lever``) since the reset, none leads
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -470,7 +487,7 @@ def step(
                        last_reset=float(reset), round_start=math.nan,
                        observed_last=None, observed_p_HP=None,
                        witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
-                       observers=(), refined_solution=None, last_refinement=-math.inf)
+                       observers=(), refined_solution=None, last_refinement=-math.inf, more_motion=False)
     bank = record_pose(bank, time, X_WH)
     if (scene_turn is not None and bank.moved_from_x is not None and bank.turn is None and scene_turn.move > 0
             and scene_turn.start <= bank.moved_at <= scene_turn.time):
@@ -559,6 +576,7 @@ def step(
                 if math.isnan(round_start):
                     round_start = float(frame_time)
     archive = _archived(archive, params)
+    held_back = False
     # The first to converge leads (the smallest expected error among simultaneous ones).
     converged = [] if leader >= 0 else [c for c in kept if c.solution.verdict.converged]
     if converged:
@@ -566,16 +584,21 @@ def step(
             best = _solve(best, criteria, forgetting_factor, refine=True)
             confirmed = _confirmed(best, kept, params, row, usable, (p_CP, X_frame))
             if best.solution.verdict.converged and confirmed:
-                kind = "identified"
+                kind, statistics = "identified", [best.statistic]
                 if params.joint:
-                    best, num_points = _joint_refined(best, kept, archive, params)
-                    if num_points > 1:
-                        kind = f"identified, camera refined with {num_points} points"
-                kept = [best if c.feature_id == best.feature_id else c for c in kept]
-                leader = best.feature_id
-                adopted_mse = best.solution.expected_mse
-                adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
-                                                  best.admitted, round_start, best.solution.estimate, kind),)
+                    best, statistics = _joint_refined(best, kept, archive, params)
+                    if len(statistics) > 1:
+                        kind = f"identified, camera refined with {len(statistics)} points"
+                lever = smallest_rotation_lever(statistics, best.solution.estimate)
+                # min_rotation_lever: the points' views must pin the camera's rotation too.
+                held_back = lever < params.min_rotation_lever
+                if not held_back:
+                    kept = [best if c.feature_id == best.feature_id else c for c in kept]
+                    leader = best.feature_id
+                    adopted_mse = best.solution.expected_mse
+                    adoptions = adoptions + (Adoption(float(frame_time), leader, best.statistic.copy(),
+                                                      best.admitted, round_start, best.solution.estimate,
+                                                      kind, lever),)
     elif leader < 0 and params.keep_camera and bank.previous_x is not None:
             # A slipped tool leaves the camera where it was: if the abandoned model's camera
             # explains a candidate's samples (with its own p_HP), only p_HP is re-identified.
@@ -616,6 +639,8 @@ def step(
     # checks a solution's samples against the count since a reset); after, observations count.
     count = bank.sample_count + (1 if fed and bank.leader < 0 else 0)
     new_leader = leader != bank.leader
+    # Once a leader was held back for min_rotation_lever, more motion is wanted until one leads.
+    more_motion = leader < 0 and (bank.more_motion or held_back)
     bank = replace(bank, candidates=tuple(kept), leader=leader, rejected=rejected, round_start=round_start,
                    sample_count=count, archive=tuple(archive),
                    last_frame=float(frame_time), adoptions=adoptions,
@@ -623,7 +648,7 @@ def step(
                    observed_last=bank.observed_last if leader == bank.leader else None,
                    observed_p_HP=bank.observed_p_HP if leader == bank.leader else None,
                    witness=bank.witness if leader == bank.leader else -1,
-                   adopted_mse=adopted_mse)
+                   adopted_mse=adopted_mse, more_motion=more_motion)
     if new_leader:
         bank = replace(bank, refined_solution=None, last_refinement=float(frame_time))
         if leader >= 0:
@@ -669,7 +694,8 @@ def _refine_adopted(bank: CandidateBank, params: CandidateParams, reference_x, t
     start = EyeToHandEstimate(R_WC, p_WC, p_HP, x, mse)
     seed = replace(leader, solution=replace(leader.solution, projected=start, refined=start,
                                             expected_mse=max(mse, bank.adopted_mse)))
-    refined, num_points = _joint_refined(seed, bank.candidates, bank.archive, params)
+    refined, statistics = _joint_refined(seed, bank.candidates, bank.archive, params)
+    num_points = len(statistics)
     if num_points < 2:
         return bank
     estimate = refined.solution.estimate
@@ -687,7 +713,7 @@ def _archived(archive: list, params: CandidateParams) -> list:
     return sorted(useful, key=lambda c: -c.solution.num_samples)[: params.max_archived]
 
 
-def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tuple[Candidate, int]:
+def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tuple[Candidate, list]:
     """``params.joint``: the leader's camera refined jointly with every other candidate (tracked
     or archived, ``joint_min_samples`` samples) that it explains (``eye_to_hand.refine_joint``:
     one camera, one ``p_HP`` per point). Members are the points whose own mean squared error
@@ -695,10 +721,11 @@ def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> t
     the leader's camera, then again under the joint one (three times with ``stitch_radius``: the
     groups of tracks of one point are formed again under each better camera). Returns the leader
     with the joint camera and its own ``p_HP`` (its group's, when stitched; its verdict and
-    ``expected_mse`` unchanged: the paper's rule judges the leader), and the number of tracks used."""
+    ``expected_mse`` unchanged: the paper's rule judges the leader), and the statistics of the
+    points used (one per group when stitched; the leader's first)."""
     estimate = best.solution.estimate
     if estimate is None:
-        return best, 1
+        return best, [best.statistic]
     others = [c for c in list(kept) + list(archive)
               if c.feature_id != best.feature_id and c.solution.num_samples >= params.joint_min_samples]
     R, p_WC = estimate.R_WC, estimate.p_WC
@@ -708,19 +735,28 @@ def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> t
         members = [c for c in others if mean_squared_error_of(
             c.statistic, pack_x(R, p_WC, best_p_HP_given_camera(c.statistic, R, p_WC))) <= limit]
         if not members:
-            return best, 1
+            return best, [best.statistic]
         statistics = [c.statistic for c in [best] + members]
         if params.stitch_radius > 0:
             statistics = [s for _, s in stitch(statistics, R, p_WC, params.stitch_radius)]
         P = np.array([best_p_HP_given_camera(s, R, p_WC) for s in statistics])
         refined = refine_joint([_S(s) for s in statistics], R, p_WC, P)
         if refined is None:
-            return best, 1
+            return best, [best.statistic]
         R, p_WC, P = refined
     x = pack_x(R, p_WC, P[0])  # the leader's point (its group is the first)
     joint = EyeToHandEstimate(R, p_WC.copy(), P[0].copy(), x, mean_squared_error_of(best.statistic, x))
     solution = replace(best.solution, projected=joint, refined=joint)
-    return replace(best, solution=solution), len(members) + 1
+    return replace(best, solution=solution), statistics
+
+
+def smallest_rotation_lever(statistics: list, estimate: EyeToHandEstimate | None) -> float:
+    """The smallest of ``eye_to_hand.rotation_levers`` of the points' statistics (each point with
+    its best ``p_HP``) at the estimate's camera, m (0 without an estimate)."""
+    if estimate is None:
+        return 0.0
+    P = [best_p_HP_given_camera(s, estimate.R_WC, estimate.p_WC) for s in statistics]
+    return float(rotation_levers([_S(s) for s in statistics], estimate.R_WC, estimate.p_WC, P)[0])
 
 
 # A merge of two tracks into one point may raise the mean squared error by this factor at most.
@@ -934,7 +970,7 @@ def _admit(feature_id, criteria, time, p_CP, X_WH) -> Candidate:
     identifier = EyeToHandIdentifier(criteria=criteria)
     identifier.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
     return Candidate(feature_id, identifier.state, identifier.solve(refine_estimate=False), float(time),
-                     float(time), np.array(p_CP), np.array(X_WH))
+                     float(time), np.array(p_CP), np.array(X_WH), sampled_p_CP=np.array(p_CP))
 
 
 def _identifier(c: Candidate, criteria, forgetting_factor) -> EyeToHandIdentifier:
@@ -951,12 +987,22 @@ def _solve(c: Candidate, criteria, forgetting_factor, refine: bool) -> Candidate
 def _feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, refine) -> Candidate:
     gated = within_motion_gate(c.last_p_CP, c.last_X_WH, p_CP, X_WH, params)
     c = replace(c, last_p_CP=np.array(p_CP), last_X_WH=np.array(X_WH))
-    if not gated:
+    if not gated or not _new_view(c, p_CP, params):
         return c
     identifier = _identifier(c, criteria, forgetting_factor)
     identifier.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
-    return replace(c, statistic=identifier.state, last_sample=float(time),
+    return replace(c, statistic=identifier.state, last_sample=float(time), sampled_p_CP=np.array(p_CP),
                    solution=identifier.solve(refine_estimate=refine))
+
+
+def _new_view(c: Candidate, p_CP, params: CandidateParams) -> bool:
+    """``min_view_change``: whether the point moved at least that far in the camera frame since its
+    last sample. A point's errors repeat with its view (the same pose of the tool, the same error),
+    so a view held for a second is one error counted thirty times: Eq. (1)'s sum then weighs the
+    views by how long the arm held them (the detector's trials and the pause after a convergence
+    hold it), and the camera leans towards the few held views."""
+    return (params.min_view_change <= 0 or c.sampled_p_CP is None
+            or float(np.linalg.norm(np.asarray(p_CP) - c.sampled_p_CP)) >= params.min_view_change)
 
 
 def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x,

@@ -114,6 +114,7 @@ class CandidateIdentifiers(LeafSystem):
         - X_WC
         - p_HP
         - candidates
+        - more_motion
 
     Inputs: ``tracked_features`` (``TrackedFeatures`` of an ``OpticalFlowTracker``: ids, ``p_CP``
     in m, ``valid``, capture ``time``), ``feature_on_body`` (``FeatureBodyFlags`` of a
@@ -140,6 +141,10 @@ class CandidateIdentifiers(LeafSystem):
     ``observation`` is ``[sample_count, s_t]`` of the observed feature (the leader's, or a
     re-acquired one) under ``reference_x``, m^2; ``X_WC`` (RigidTransform), ``p_HP`` (3, m);
     ``candidates`` (``candidates.CandidateBank``: every candidate, the leader, the adoptions).
+    ``more_motion`` (1): 1 from a frame where a candidate converged and was confirmed but its
+    points' views did not pin the camera's rotation (``params.min_rotation_lever``) until a leader
+    is chosen or a reset, else 0: the hand should move more widely (connect an
+    ``IdentifyingMotion``'s ``more_motion``).
 
     State: the ``CandidateBank`` (abstract, immutable: contexts clone), updated every ``period``
     s (a periodic unrestricted update at the camera's rate).
@@ -187,6 +192,10 @@ class CandidateIdentifiers(LeafSystem):
         )  # fmt: skip
         self._formulation.declare_outputs(self, self.solution)
         self.DeclareStateOutputPort("candidates", self._bank)
+        self.DeclareVectorOutputPort(
+            "more_motion", 1, lambda c, o: o.SetFromVector([float(self.bank(c).more_motion)]),
+            prerequisites_of_calc={self.all_state_ticket()},
+        )  # fmt: skip
 
     @property
     def params(self) -> CandidateParams:

@@ -30,9 +30,10 @@ class IdentifyingMotion(LeafSystem):
     detector's requests back until the arm is there (0.05 rad, or ``max_hold`` s): the detector's
     confirming trials can follow each other for tens of seconds (after the slip of
     ``hand_eye.yaml`` with seed 1: 55 s within 0.1 rad of one posture), and then nothing converges.
-    Not before the first convergence: the body features the candidates come from are what those
-    trials find then (forcing far postures then too found seed 1's first tool point at 29.5 s, not
-    6 s, and delayed seed 2's first convergence to 40 s).
+    Before the first convergence only while the identifiers ask for more motion (``more_motion``:
+    their points converged but do not pin the camera's rotation yet): until then the body features
+    the candidates come from are what those trials find (forcing far postures from the start found
+    seed 1's first tool point at 29.5 s, not 6 s, and delayed seed 2's first convergence to 40 s).
 
     .. pydrake_system::
 
@@ -41,11 +42,14 @@ class IdentifyingMotion(LeafSystem):
         - detector_confirm (optional)
         - mode
         - joint_positions
+        - more_motion (optional)
         output_ports:
         - confirm
 
     Inputs: ``detector_confirm`` (``[request_id, joint, q_1..q_n]``, the detector's ``confirm``),
-    ``mode`` (the ``CoordinationStateMachine``'s), ``joint_positions`` (n, rad). Output:
+    ``mode`` (the ``CoordinationStateMachine``'s), ``joint_positions`` (n, rad), ``more_motion`` (1:
+    > 0 while a ``CandidateIdentifiers``' ``more_motion`` asks for it; unconnected: never before the
+    first convergence). Output:
     ``confirm`` (``[request_id, joint, q_1..q_n]``, the motion generator's ``confirm`` format: a new
     id is a new request; connect to the station's ``motion_confirm``). Every ``period`` s a
     periodic discrete update; the draws come from a generator seeded with (``seed``, request
@@ -69,6 +73,7 @@ class IdentifyingMotion(LeafSystem):
         self._detector = self.DeclareVectorInputPort("detector_confirm", 2 + n)
         self._mode = self.DeclareVectorInputPort("mode", 1)
         self._q = self.DeclareVectorInputPort("joint_positions", n)
+        self._more = self.DeclareVectorInputPort("more_motion", 1)
         self._request = _POSTURE + n  # where the output request starts in the state
         initial = np.zeros(self._request + 1 + n)
         initial[self._request] = -1.0  # the output request's joint: -1, a usual move
@@ -96,7 +101,8 @@ class IdentifyingMotion(LeafSystem):
         # the detector asks); it has the arm until it is there (the detector's request stays
         # pending till then), for max_hold at most.
         x[_HAS_OBSERVED] = max(x[_HAS_OBSERVED], float(not identifying))
-        overdue = (identifying and x[_HAS_OBSERVED] > 0 and t - x[_NEAR_SINCE] >= self._max_hold
+        asked = self._more.HasValue(context) and self._more.Eval(context)[0] > 0
+        overdue = (identifying and (x[_HAS_OBSERVED] > 0 or asked) and t - x[_NEAR_SINCE] >= self._max_hold
                    and t - x[_LAST_FORCED] >= self._max_hold)
         on_its_way = (t - x[_LAST_FORCED] < self._max_hold
                       and np.max(np.abs(q - x[self._request + 1:])) > _REACHED)
