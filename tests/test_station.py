@@ -285,3 +285,16 @@ def test_backdrop_gives_the_static_scene_corners():
     assert plain <= 2 < 20 <= posters
     # The posters are on the wall: the same depth within their 3 cm offset and the depth noise.
     assert 3.5 < posters_depth < 5.0 and abs(posters_depth - plain_depth) < 0.1
+
+
+def test_the_pinned_camera_variant_is_hand_eye_with_its_keys():
+    """``bench/hand_eye_pinned_camera.yaml`` (a variant measured in the README) is
+    ``diagrams/hand_eye.yaml`` with views, not frames, and the rotation lever: nothing else differs."""
+    base = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
+    variant = load_scenario(ROOT / "bench" / "hand_eye_pinned_camera.yaml")
+    keys = variant.hand_eye.candidates
+    assert (keys.min_view_change, keys.min_rotation_lever) == (0.001, 0.015)
+    assert variant.hand_eye.coordination.min_samples == 100
+    keys.min_view_change, keys.min_rotation_lever = 0.0, 0.0
+    variant.hand_eye.coordination.min_samples = base.hand_eye.coordination.min_samples
+    assert repr(variant) == repr(base)
