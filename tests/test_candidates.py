@@ -716,6 +716,7 @@ def test_a_held_view_is_one_sample_with_min_view_change():
         est = candidates._identifier(c, CRITERIA, 1.0).solve(refine_estimate=True).estimate
         errors[d] = np.linalg.norm(est.p_WC - TRUTH.X_WC[:3, 3])
         counts[d] = c.solution.num_samples
+        assert c.admitted == 0.0  # held for 10 s (> max_lost_time), seen all along: not lost
     assert counts[0.0] == 420 and 20 <= counts[0.002] <= 122  # at most the 120 moving frames and one held
     assert errors[0.002] < errors[0.0] / 3
 

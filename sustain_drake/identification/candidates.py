@@ -282,7 +282,7 @@ class Candidate:
     statistic: np.ndarray
     solution: EyeToHandSolution
     admitted: float  # s
-    last_sample: float  # s, time of the last sample fed (admission time before any)
+    last_sample: float  # s, the last sample fed or held view seen again (admission time before any)
     last_p_CP: np.ndarray | None = None  # the last measured point (accepted or not), for the gate
     last_X_WH: np.ndarray | None = None
     verified_samples: int = 0  # its samples taken up to the last frame the adopted model was verified
@@ -987,8 +987,10 @@ def _solve(c: Candidate, criteria, forgetting_factor, refine: bool) -> Candidate
 def _feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, refine) -> Candidate:
     gated = within_motion_gate(c.last_p_CP, c.last_X_WH, p_CP, X_WH, params)
     c = replace(c, last_p_CP=np.array(p_CP), last_X_WH=np.array(X_WH))
-    if not gated or not _new_view(c, p_CP, params):
+    if not gated:
         return c
+    if not _new_view(c, p_CP, params):
+        return replace(c, last_sample=float(time))  # seen where it was: held, not lost
     identifier = _identifier(c, criteria, forgetting_factor)
     identifier.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
     return replace(c, statistic=identifier.state, last_sample=float(time), sampled_p_CP=np.array(p_CP),
