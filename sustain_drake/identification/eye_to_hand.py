@@ -398,8 +398,9 @@ def rotation_levers(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p
     ``delta L`` RMS, so errors of the points that agree from sample to sample (a view's error is
     the same each time the view recurs) of size ``e`` turn it by about ``e / L``: while the hand
     moves little, the smallest lever is millimetres and the camera turns about the workspace
-    (``hand_eye.yaml``: 6-9 mm at a first convergence 2.2-3.2 mm off, ~30 mm a few seconds of
-    babbling later, 1 mm off). Zeros if the other unknowns are not determined."""
+    (``hand_eye.yaml``, four runs: 6-9 mm at the first convergences, whose cameras were up to
+    2.7 mm off; 25-30 mm a few seconds of babbling later, when the same points put the camera about
+    1 mm off). Zeros if the other unknowns are not determined."""
     K = len(S_list)
     p_HP = np.asarray(p_HP, float).reshape(K, 3)
     H, _ = _joint_normal_equations(S_list, R, np.asarray(p_WC, float), p_HP)
