@@ -156,7 +156,8 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     if hand_eye.identifying_motion_interval > 0:  # far postures while identifying (richer motion)
         motion = builder.AddSystem(IdentifyingMotion(
             joint_ranges, hand_eye.identifying_motion_interval, seed=motion_seed, period=period,
-            max_hold=hand_eye.identifying_motion_max_hold))  # fmt: skip
+            max_hold=hand_eye.identifying_motion_max_hold,
+            more_motion_reach=hand_eye.identifying_motion_reach or None))  # fmt: skip
         motion.set_name("identifying_motion")
         if perception.confirm:  # the detector's confirming requests first (body detection, §3.3)
             builder.Connect(detector.GetOutputPort("confirm"), motion.GetInputPort("detector_confirm"))

@@ -218,6 +218,12 @@ def test_a_lost_observed_point_hands_over_to_a_consistent_candidate():
     # observe_radius: 4 is 5.4 cm from the adopted tool point; within 3 cm only, nobody takes over.
     bank, _ = run(frames, reference=x_true, params=replace(HANDOVER, observe_radius=0.03))
     assert bank.leader == 9 and bank.observed == -1
+    # min_view_change: the observation counts the frames a point was tracked, not its views (4
+    # has fewer views than observe_min_samples, and takes over all the same).
+    bank, _ = run(frames, reference=x_true, params=replace(HANDOVER, min_view_change=0.01))
+    c = bank.find(4)
+    assert bank.leader == 9 and bank.observed == 4
+    assert c.solution.num_samples < HANDOVER.observe_min_samples <= c.frames
 
     def only_other_link(k, X, rng):
         if k >= 460:
@@ -698,7 +704,8 @@ def test_a_held_view_is_one_sample_with_min_view_change():
     measurement is 3 mm off (the same view, the same error, as a rendered mark's), between two
     seconds of rich motion. Every frame a sample: the held view outweighs the motion and pulls
     the camera; a sample only when the point moved 2 mm since the last: the held view is one
-    sample and the camera is several times nearer the truth."""
+    sample and the camera is several times nearer the truth. The frames a point was tracked (the
+    observation's counts) are every frame either way."""
     def pose(k):
         return hand_pose(k if k < 60 else 60 if k < 360 else k - 300)
 
@@ -717,6 +724,7 @@ def test_a_held_view_is_one_sample_with_min_view_change():
         errors[d] = np.linalg.norm(est.p_WC - TRUTH.X_WC[:3, 3])
         counts[d] = c.solution.num_samples
         assert c.admitted == 0.0  # held for 10 s (> max_lost_time), seen all along: not lost
+        assert c.frames == 420  # the observation's counts go on: every frame it was tracked
     assert counts[0.0] == 420 and 20 <= counts[0.002] <= 122  # at most the 120 moving frames and one held
     assert errors[0.002] < errors[0.0] / 3
 
@@ -724,7 +732,8 @@ def test_a_held_view_is_one_sample_with_min_view_change():
 def test_a_camera_the_views_do_not_pin_waits_for_more_motion():
     """``min_rotation_lever``: the leader's camera is adopted only once its points' views pin the
     camera's rotation (``smallest_rotation_lever``); until then no leader and ``more_motion``. The
-    hand turns within 0.05 rad and moves within 2 cm for 10 s, then moves richly."""
+    hand turns within 0.05 rad and moves within 2 cm for 10 s, then moves richly. Held back and
+    then lost, the points no longer ask for more motion."""
     def pose(k):
         if k >= 300:
             return hand_pose(k)
@@ -753,3 +762,10 @@ def test_a_camera_the_views_do_not_pin_waits_for_more_motion():
     assert late.time > 300 * DT and late.rotation_lever >= 0.02
     assert any(more and leader < 0 for stop, leader, more in held_back if stop <= 300)
     assert not bank.more_motion
+    # Held back, then the points are lost: no converged candidate is left, so more motion is no
+    # longer asked for (the detector's trials must find new body features).
+    bank, k = run(lambda j, X, rng: frames(j, X, rng) if j < 240 else None, params=params, pose=pose)
+    assert bank.leader < 0 and bank.more_motion
+    bank, _ = run(lambda j, X, rng: ([], np.zeros((0, 3)), [], []) if j < k + 90 else None, bank=bank,
+                  start=k, params=params, pose=pose)
+    assert bank.leader < 0 and not bank.candidates and not bank.more_motion

@@ -91,12 +91,34 @@ def test_a_far_posture_before_any_convergence_when_the_identifiers_ask_for_more_
     assert own == []
 
 
-def _chatty_detector(observed_before, more_motion=None):
-    """The requests made over 10 s (time, joint), the own ones' and the detector's times."""
+def test_with_a_reach_the_identifiers_ask_is_met_at_once_within_reach():
+    """``more_motion_reach``: while the identifiers ask for more motion, a posture within the reach
+    (max-norm) of the arm's, after one interval near a posture (not ``max_hold``); the far
+    postures of the whole ranges otherwise."""
+    postures = []
+    new, own, forwarded = _chatty_detector(observed_before=0.0, more_motion=1.0, reach=0.3,
+                                           postures=postures)
+    # One interval near a posture (the arm's start) is enough: the first at 1.1 s, and five in
+    # 10 s, where without the reach two came (4.3 and 9.7 s, above).
+    assert own[0] == pytest.approx(1.1, abs=0.15) and len(own) >= 4
+    lower, upper = np.array(RANGES).T  # the arm starts at 0, outside the ranges: from the nearest in them
+    steps = [np.max(np.abs(requested - np.clip(q, lower, upper))) for q, requested in postures]
+    assert len(steps) == len(own) and max(steps) <= 0.3 + 1e-9 and min(steps) > 0.1
+    far = []
+    _chatty_detector(observed_before=0.0, more_motion=1.0, postures=far)
+    assert min(np.max(np.abs(requested - q)) for q, requested in far) > 0.5
+    with pytest.raises(ValueError, match="more_motion_reach"):
+        IdentifyingMotion(RANGES, interval=1.0, more_motion_reach=0.0)
+
+
+def _chatty_detector(observed_before, more_motion=None, reach=None, postures=None):
+    """The requests made over 10 s (time, joint), the own ones' and the detector's times; with a
+    list ``postures``, each own request's ``(arm's posture, requested posture)`` is appended."""
     builder = DiagramBuilder()
     scripted = builder.AddSystem(Scripted(t_observe=np.inf, t_request=np.inf, observe=(0.1, observed_before)))
     detector = builder.AddSystem(Chatty())
-    motion = builder.AddSystem(IdentifyingMotion(RANGES, interval=1.0, seed=3, period=0.1))
+    motion = builder.AddSystem(IdentifyingMotion(RANGES, interval=1.0, seed=3, period=0.1,
+                                                 more_motion_reach=reach))
     posture = builder.AddSystem(MatrixGain(np.hstack([np.zeros((5, 2)), np.eye(5)])))  # q of the request
     arm = builder.AddSystem(DiscreteTimeDelay(0.1, 10, 5))
     builder.Connect(scripted.GetOutputPort("mode"), motion.GetInputPort("mode"))
@@ -112,6 +134,9 @@ def _chatty_detector(observed_before, more_motion=None):
     for t in np.arange(0.1, 10.0 + 1e-9, 0.1):
         simulator.AdvanceTo(t)
         out = motion.GetOutputPort("confirm").Eval(motion.GetMyContextFromRoot(simulator.get_context()))
+        if postures is not None and out[1] == -1.0 and (not joints or out[0] != joints[-1][1]):
+            q = arm.get_output_port().Eval(arm.GetMyContextFromRoot(simulator.get_context()))
+            postures.append((np.array(q), np.array(out[2:])))
         joints.append((round(t, 1), out[0], out[1]))
     new = [(t, j) for (t, i, j), prev in zip(joints[1:], joints[:-1], strict=True) if i != prev[1]]
     return new, [t for t, j in new if j == -1.0], [t for t, j in new if j == 2.0]

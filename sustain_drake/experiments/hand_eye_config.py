@@ -63,7 +63,10 @@ class HandEyeConfig:
     posture when no confirming request came for that long (``systems.identifying_motion``); 0: off.
     ``identifying_motion_max_hold``: s (at least the interval); after a first convergence, while
     identifying again, the far posture also comes when the arm has stayed within 0.2 rad of one
-    posture that long, however often the detector asks.
+    posture that long, however often the detector asks. ``identifying_motion_reach``: rad; > 0: the
+    postures asked for while the candidates wait for more motion (``min_rotation_lever``) lie
+    within this (max-norm) of the current one and come after one interval near a posture (0: the
+    far postures of the whole ranges, after ``identifying_motion_max_hold``).
     ``refine_points``: feed the candidates the refined points (``FeatureRefiner``: sub-pixel corner
     and robust depth, ``refinement``) instead of the tracker's. ``false_alarm_window``: s, a
     detection with no disturbance in that long before it is a false alarm (evaluation only).
@@ -75,6 +78,7 @@ class HandEyeConfig:
     camera_motion: CameraMotionConfig = field(default_factory=CameraMotionConfig)
     identifying_motion_interval: float = 0.0
     identifying_motion_max_hold: float = 3.0
+    identifying_motion_reach: float = 0.0
     refine_points: bool = True
     refinement: RefinementConfig = field(default_factory=RefinementConfig)
     false_alarm_window: float = 2.0

@@ -202,8 +202,11 @@ class CandidateParams:
             paper's). A point's measurement errors repeat with its view, so Eq. (1)'s sum over
             frames weighs each view by how long the arm held it (the detector's confirming trials
             and the pause after a convergence hold it for seconds) and the camera leans towards
-            the held views. Every sample count (``min_samples`` and the counts above) then counts
-            views.
+            the held views. The identification's counts (the criteria's ``min_samples``,
+            ``joint_min_samples``) then count views; the observation's (``observe_min_samples``,
+            ``keep_camera_min_samples``, ``turn_min_samples``, ``blind_min_samples``,
+            ``verified_overlap``) count the frames a point was tracked, as without it: they ask how
+            long a point has been followed, and a point waiting for views must not stop observing.
         min_rotation_lever: m; > 0: a converged leader is adopted only when its points' views pin
             the camera's rotation: the smallest of their ``eye_to_hand.rotation_levers`` (with the
             joint refinement's points) at least this (0: no such test, the paper's rule).
@@ -287,6 +290,7 @@ class Candidate:
     last_X_WH: np.ndarray | None = None
     verified_samples: int = 0  # its samples taken up to the last frame the adopted model was verified
     sampled_p_CP: np.ndarray | None = None  # the point of its last sample (``min_view_change``)
+    frames: int = 1  # frames it was fed (a new view or a held one): the observation's counts
 
 
 @dataclass(frozen=True)
@@ -359,7 +363,7 @@ class CandidateBank:
     turn: object | None = None  # the static scene's turn across that move (``step``'s scene_turn)
     turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
     reset_time: float = -math.inf  # s, when the last reset came
-    more_motion: bool = False  # a leader held back (``min_rotation_lever``) since the reset, none leads
+    more_motion: bool = False  # a leader was held back (``min_rotation_lever``), none leads, one still converged
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -542,7 +546,7 @@ def step(
             misfit = sol.num_samples >= criteria.min_samples and not sol.expected_rms <= params.reject_rms
             # While observing (with observers), a point the adopted camera does not explain is not
             # of the hand (or not any more): its slot goes to a new point.
-            misfit = misfit or (observing and sol.num_samples >= params.observe_min_samples
+            misfit = misfit or (observing and c.frames >= params.observe_min_samples
                                 and rotation_spread(c.statistic) >= params.min_rotation_spread
                                 and not _explained(c, reference_x, bank.adopted_mse, params))
             if too_long or misfit:
@@ -639,8 +643,10 @@ def step(
     # checks a solution's samples against the count since a reset); after, observations count.
     count = bank.sample_count + (1 if fed and bank.leader < 0 else 0)
     new_leader = leader != bank.leader
-    # Once a leader was held back for min_rotation_lever, more motion is wanted until one leads.
-    more_motion = leader < 0 and (bank.more_motion or held_back)
+    # Once a leader was held back for min_rotation_lever, more motion is wanted until one leads or
+    # no converged candidate is left (then the detector's trials must find new body features).
+    more_motion = leader < 0 and (held_back or (bank.more_motion and any(
+        c.solution.verdict.converged for c in kept)))
     bank = replace(bank, candidates=tuple(kept), leader=leader, rejected=rejected, round_start=round_start,
                    sample_count=count, archive=tuple(archive),
                    last_frame=float(frame_time), adoptions=adoptions,
@@ -856,7 +862,7 @@ def _model_points(bank: CandidateBank, params: CandidateParams) -> tuple:
     R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
     points += [(c.feature_id, best_p_HP_given_camera(c.statistic, R_WC, p_WC))
                for c in bank.candidates + bank.archive
-               if c.solution.num_samples >= params.observe_min_samples
+               if c.frames >= params.observe_min_samples
                and rotation_spread(c.statistic) >= params.min_rotation_spread
                and _explained(c, x, bank.adopted_mse, params)]
     known = {}
@@ -899,7 +905,7 @@ def _camera_from_known_points(kept, known: dict, params: CandidateParams, adopte
     ``min_point_spread`` off a line. Returns ``(x, mse, feature_id)`` (the estimate with the ``p_HP``
     of the point nearest the adopted tool point in H, its mean squared error, that point) or None."""
     pairs = [(c, known[c.feature_id]) for c in kept
-             if c.feature_id in known and c.solution.num_samples >= params.observe_min_samples]
+             if c.feature_id in known and c.frames >= params.observe_min_samples]
     fit = _fit_dropping_misfits(pairs, lambda ps: camera_given_points(
         [_S(c.statistic) for c, _ in ps], np.array([p for _, p in ps])),
         params.observe_consistency**2 * adopted_mse)  # fmt: skip
@@ -921,7 +927,7 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     x0, turn, R_turned = bank.moved_from_x, bank.turn, bank.turned_R_WC
     R_WC0, p_WC0 = x0[0:9].reshape(3, 3, order="F"), x0[9:12]
     known_p = np.array(list(known.values()))
-    ready = [c for c in kept if c.solution.num_samples >= params.turn_min_samples]
+    ready = [c for c in kept if c.frames >= params.turn_min_samples]
     pairs = [(c, known[c.feature_id]) for c in ready if c.feature_id in known]
     # A new track (the turn ended the old one) is a known point seen from the turned camera at
     # the old position: off by the camera's unknown shift, the same for every track (over the same
@@ -989,6 +995,7 @@ def _feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, r
     c = replace(c, last_p_CP=np.array(p_CP), last_X_WH=np.array(X_WH))
     if not gated:
         return c
+    c = replace(c, frames=c.frames + 1)
     if not _new_view(c, p_CP, params):
         return replace(c, last_sample=float(time))  # seen where it was: held, not lost
     identifier = _identifier(c, criteria, forgetting_factor)
@@ -1056,8 +1063,8 @@ def _free_space_sample(bank, reference_x, X_WH, depth_gap, before: int) -> Candi
 
 def _verified(bank: CandidateBank) -> CandidateBank:
     """Every candidate's samples so far were taken while the model was verified (``verified_overlap``)."""
-    return replace(bank, candidates=tuple(c if c.verified_samples == c.solution.num_samples
-                                          else replace(c, verified_samples=c.solution.num_samples)
+    return replace(bank, candidates=tuple(c if c.verified_samples == c.frames
+                                          else replace(c, verified_samples=c.frames)
                                           for c in bank.candidates))
 
 
@@ -1132,7 +1139,7 @@ def _blind_evidence(bank, params, row, usable, x, allowable_error: float, before
     misfits = []
     for c in bank.candidates:
         k = row.get(c.feature_id)
-        if k is None or not usable[k] or c.solution.num_samples < params.blind_min_samples:
+        if k is None or not usable[k] or c.frames < params.blind_min_samples:
             continue
         p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
         misfits.append(mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP)))
@@ -1240,7 +1247,7 @@ def _consistent(bank, params, row, usable, x, frame, exclude=(), verified=False,
         k = row.get(c.feature_id)
         if k is None or not usable[k] or c.feature_id in exclude:
             continue
-        if c.solution.num_samples < (params.observe_min_samples if min_samples is None else min_samples):
+        if c.frames < (params.observe_min_samples if min_samples is None else min_samples):
             continue
         if verified and c.verified_samples < params.verified_overlap:
             continue  # first tracked while the model was not verified: its p_HP is unchecked

@@ -34,6 +34,9 @@ class IdentifyingMotion(LeafSystem):
     their points converged but do not pin the camera's rotation yet): until then the body features
     the candidates come from are what those trials find (forcing far postures from the start found
     seed 1's first tool point at 29.5 s, not 6 s, and delayed seed 2's first convergence to 40 s).
+    With ``more_motion_reach`` (rad), postures asked for while ``more_motion`` is set are drawn
+    within that reach (max-norm) of the current one, and come after one ``interval`` near a posture,
+    not ``max_hold``: the far postures end the tracks of the points that wait for more motion.
 
     .. pydrake_system::
 
@@ -57,7 +60,8 @@ class IdentifyingMotion(LeafSystem):
     """
 
     def __init__(self, joint_ranges, interval: float = 2.5, num_draws: int = 8, seed: int = 0,
-                 period: float = 1.0 / 30.0, max_hold: float | None = None):  # fmt: skip
+                 period: float = 1.0 / 30.0, max_hold: float | None = None,
+                 more_motion_reach: float | None = None):  # fmt: skip
         super().__init__()
         ranges = np.asarray(joint_ranges, float)
         if ranges.ndim != 2 or ranges.shape[1] != 2 or not np.all(ranges[:, 1] > ranges[:, 0]):
@@ -67,6 +71,9 @@ class IdentifyingMotion(LeafSystem):
         if not (interval > 0 and num_draws >= 1 and period > 0 and max_hold >= interval):
             raise ValueError("IdentifyingMotion: interval and period must be > 0, num_draws >= 1, "
                              "max_hold >= interval")
+        if more_motion_reach is not None and not more_motion_reach > 0:
+            raise ValueError(f"IdentifyingMotion: more_motion_reach must be > 0 rad, got {more_motion_reach}")
+        self._reach = None if more_motion_reach is None else float(more_motion_reach)
         self._ranges, self._interval, self._max_hold = ranges, float(interval), float(max_hold)
         self._draws, self._seed = int(num_draws), int(seed)
         n = ranges.shape[0]
@@ -102,9 +109,13 @@ class IdentifyingMotion(LeafSystem):
         # pending till then), for max_hold at most.
         x[_HAS_OBSERVED] = max(x[_HAS_OBSERVED], float(not identifying))
         asked = self._more.HasValue(context) and self._more.Eval(context)[0] > 0
-        overdue = (identifying and (x[_HAS_OBSERVED] > 0 or asked) and t - x[_NEAR_SINCE] >= self._max_hold
-                   and t - x[_LAST_FORCED] >= self._max_hold)
-        on_its_way = (t - x[_LAST_FORCED] < self._max_hold
+        # With a reach, the identifiers' ask is met at once (after one interval near a posture) by
+        # postures within reach: their points' tracks must live through it.
+        gentle = asked and self._reach is not None
+        hold = self._interval if gentle else self._max_hold
+        overdue = (identifying and (x[_HAS_OBSERVED] > 0 or asked) and t - x[_NEAR_SINCE] >= hold
+                   and t - x[_LAST_FORCED] >= hold)
+        on_its_way = (t - x[_LAST_FORCED] < hold
                       and np.max(np.abs(q - x[self._request + 1:])) > _REACHED)
         waits = identifying and (overdue or on_its_way)
         if request[0] != x[_DETECTOR_ID] and not waits:  # the detector's first (body detection, §3.3)
@@ -115,7 +126,11 @@ class IdentifyingMotion(LeafSystem):
         elif identifying and (overdue or (t - x[_LAST_TIME] >= self._interval
                                           and request[0] == x[_DETECTOR_ID])):  # none pending
             rng = np.random.default_rng([self._seed, int(x[_OWN])])
-            draws = rng.uniform(self._ranges[:, 0], self._ranges[:, 1], (self._draws, q.size))
+            low, high = self._ranges[:, 0], self._ranges[:, 1]
+            if gentle:
+                centre = np.clip(q, low, high)  # an arm just outside its ranges still gets a box in them
+                low, high = np.maximum(low, centre - self._reach), np.minimum(high, centre + self._reach)
+            draws = rng.uniform(low, high, (self._draws, q.size))
             far = draws[np.argmax(np.max(np.abs(draws - q), axis=1))]
             x[_ID] += 1
             x[_OWN] += 1
