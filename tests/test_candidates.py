@@ -732,8 +732,9 @@ def test_a_held_view_is_one_sample_with_min_view_change():
 def test_a_camera_the_views_do_not_pin_waits_for_more_motion():
     """``min_rotation_lever``: the leader's camera is adopted only once its points' views pin the
     camera's rotation (``smallest_rotation_lever``); until then no leader and ``more_motion``. The
-    hand turns within 0.05 rad and moves within 2 cm for 10 s, then moves richly. Held back and
-    then lost, the points no longer ask for more motion."""
+    hand turns within 0.05 rad and moves within 2 cm for 10 s, then moves richly. Held back
+    and then its point not seen (its track ended, or no refined point), the leader is adopted as it
+    is."""
     def pose(k):
         if k >= 300:
             return hand_pose(k)
@@ -762,10 +763,26 @@ def test_a_camera_the_views_do_not_pin_waits_for_more_motion():
     assert late.time > 300 * DT and late.rotation_lever >= 0.02
     assert any(more and leader < 0 for stop, leader, more in held_back if stop <= 300)
     assert not bank.more_motion
-    # Held back, then the points are lost: no converged candidate is left, so more motion is no
-    # longer asked for (the detector's trials must find new body features).
+    # Held back, then every track ends: the held leader is adopted from the archive, as it is.
     bank, k = run(lambda j, X, rng: frames(j, X, rng) if j < 240 else None, params=params, pose=pose)
-    assert bank.leader < 0 and bank.more_motion
+    held = bank.held_back
+    assert bank.leader < 0 and bank.more_motion and held in (4, 5)
     bank, _ = run(lambda j, X, rng: ([], np.zeros((0, 3)), [], []) if j < k + 90 else None, bank=bank,
                   start=k, params=params, pose=pose)
-    assert bank.leader < 0 and not bank.candidates and not bank.more_motion
+    assert bank.leader == held and bank.adoptions[0].time == pytest.approx(k * DT) and not bank.more_motion
+    assert [c.feature_id for c in bank.candidates] == [held] and held not in [c.feature_id for c in bank.archive]
+    # Held back, then the held leader's point is not seen (no refined point): it is adopted at once,
+    # with the lever it has (the motion that turned its face away will not pin the camera more).
+    bank, k = run(lambda j, X, rng: frames(j, X, rng) if j < 240 else None, params=params, pose=pose)
+    held = bank.held_back
+    assert bank.leader < 0 and bank.more_motion and held in (4, 5)
+
+    def unseen(j, X, rng):
+        ids, p_CP, valid, body = frames(j, X, rng)
+        return ids, p_CP, [i != held for i in ids], body
+
+    bank, _ = run(lambda j, X, rng: unseen(j, X, rng) if j < k + 30 else None,
+                  bank=bank, start=k, params=params, pose=pose)
+    adopted = bank.adoptions[0]
+    assert adopted.time == pytest.approx(k * DT) and adopted.feature_id == held and bank.leader == held
+    assert 0.005 < adopted.rotation_lever < params.min_rotation_lever and not bank.more_motion

@@ -210,7 +210,9 @@ class CandidateParams:
         min_rotation_lever: m; > 0: a converged leader is adopted only when its points' views pin
             the camera's rotation: the smallest of their ``eye_to_hand.rotation_levers`` (with the
             joint refinement's points) at least this (0: no such test, the paper's rule).
-            Otherwise it waits for more of the motion (``CandidateBank.more_motion``).
+            Otherwise it waits for more of the motion (``CandidateBank.more_motion``) as long as its
+            point is seen: on the first frame it is not (no refined point, or its track ended),
+            it is adopted with the lever it has.
     """
 
     max_candidates: int = 8
@@ -364,6 +366,7 @@ class CandidateBank:
     turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
     reset_time: float = -math.inf  # s, when the last reset came
     more_motion: bool = False  # a leader was held back (``min_rotation_lever``), none leads, one still converged
+    held_back: int = -1  # the feature id of the candidate held back (``min_rotation_lever``), -1: none
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -491,7 +494,8 @@ def step(
                        last_reset=float(reset), round_start=math.nan,
                        observed_last=None, observed_p_HP=None,
                        witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
-                       observers=(), refined_solution=None, last_refinement=-math.inf, more_motion=False)
+                       observers=(), refined_solution=None, last_refinement=-math.inf, more_motion=False,
+                       held_back=-1)
     bank = record_pose(bank, time, X_WH)
     if (scene_turn is not None and bank.moved_from_x is not None and bank.turn is None and scene_turn.move > 0
             and scene_turn.start <= bank.moved_at <= scene_turn.time):
@@ -581,12 +585,23 @@ def step(
                     round_start = float(frame_time)
     archive = _archived(archive, params)
     held_back = False
+    # min_rotation_lever: the leader held back on an earlier frame waits for views only while its
+    # point is seen; once it is not (its face turned away, its track ended: seed 2's converged
+    # points all went within 1 s), the views it waited for are over and it is adopted as it is.
+    held = (next((c for c in kept + archive if c.feature_id == bank.held_back), None)
+            if leader < 0 and bank.held_back >= 0 else None)  # fmt: skip
+    unseen = held is not None and (row.get(held.feature_id) is None or not usable[row[held.feature_id]])
     # The first to converge leads (the smallest expected error among simultaneous ones).
     converged = [] if leader >= 0 else [c for c in kept if c.solution.verdict.converged]
-    if converged:
-            best = min(converged, key=lambda c: c.solution.expected_mse)
-            best = _solve(best, criteria, forgetting_factor, refine=True)
-            confirmed = _confirmed(best, kept, params, row, usable, (p_CP, X_frame))
+    if converged or (unseen and held.solution.verdict.converged):
+            if unseen and held.solution.verdict.converged:
+                best, confirmed = _solve(held, criteria, forgetting_factor, refine=True), True  # confirmed when held
+                archive = [c for c in archive if c.feature_id != held.feature_id]
+                kept = [c for c in kept if c.feature_id != held.feature_id] + [best]
+            else:
+                best = min(converged, key=lambda c: c.solution.expected_mse)
+                best = _solve(best, criteria, forgetting_factor, refine=True)
+                confirmed = _confirmed(best, kept, params, row, usable, (p_CP, X_frame))
             if best.solution.verdict.converged and confirmed:
                 kind, statistics = "identified", [best.statistic]
                 if params.joint:
@@ -595,7 +610,7 @@ def step(
                         kind = f"identified, camera refined with {len(statistics)} points"
                 lever = smallest_rotation_lever(statistics, best.solution.estimate)
                 # min_rotation_lever: the points' views must pin the camera's rotation too.
-                held_back = lever < params.min_rotation_lever
+                held_back = lever < params.min_rotation_lever and not unseen
                 if not held_back:
                     kept = [best if c.feature_id == best.feature_id else c for c in kept]
                     leader = best.feature_id
@@ -647,6 +662,8 @@ def step(
     # no converged candidate is left (then the detector's trials must find new body features).
     more_motion = leader < 0 and (held_back or (bank.more_motion and any(
         c.solution.verdict.converged for c in kept)))
+    held_id = (best.feature_id if held_back
+               else bank.held_back if leader < 0 and held is not None and not unseen else -1)
     bank = replace(bank, candidates=tuple(kept), leader=leader, rejected=rejected, round_start=round_start,
                    sample_count=count, archive=tuple(archive),
                    last_frame=float(frame_time), adoptions=adoptions,
@@ -654,7 +671,7 @@ def step(
                    observed_last=bank.observed_last if leader == bank.leader else None,
                    observed_p_HP=bank.observed_p_HP if leader == bank.leader else None,
                    witness=bank.witness if leader == bank.leader else -1,
-                   adopted_mse=adopted_mse, more_motion=more_motion)
+                   adopted_mse=adopted_mse, more_motion=more_motion, held_back=held_id)
     if new_leader:
         bank = replace(bank, refined_solution=None, last_refinement=float(frame_time))
         if leader >= 0:
