@@ -211,8 +211,8 @@ class CandidateParams:
             the camera's rotation: the smallest of their ``eye_to_hand.rotation_levers`` (with the
             joint refinement's points) at least this (0: no such test, the paper's rule).
             Otherwise it waits for more of the motion (``CandidateBank.more_motion``) as long as its
-            point is seen: on the first frame it is not (no refined point, or its track ended),
-            it is adopted with the lever it has.
+            point is seen: once its track ends or it has had no refined point for 0.3 s, it is
+            adopted with the lever it has.
     """
 
     max_candidates: int = 8
@@ -590,7 +590,8 @@ def step(
     # points all went within 1 s), the views it waited for are over and it is adopted as it is.
     held = (next((c for c in kept + archive if c.feature_id == bank.held_back), None)
             if leader < 0 and bank.held_back >= 0 else None)  # fmt: skip
-    unseen = held is not None and (row.get(held.feature_id) is None or not usable[row[held.feature_id]])
+    unseen = held is not None and (row.get(held.feature_id) is None
+                                   or frame_time - held.last_sample > _HELD_UNSEEN_TIME)
     # The first to converge leads (the smallest expected error among simultaneous ones).
     converged = [] if leader >= 0 else [c for c in kept if c.solution.verdict.converged]
     if converged or (unseen and held.solution.verdict.converged):
@@ -1276,6 +1277,10 @@ def _consistent(bank, params, row, usable, x, frame, exclude=(), verified=False,
             out.append((mse, c.feature_id, p_HP, k))
     return out
 
+
+# s: a held-back leader's point missing this long is gone, not a flicker of the refiner (a saddle
+# missed for 1-3 frames at 30 Hz; adopting on those took levers of 9 mm, not 15).
+_HELD_UNSEEN_TIME = 0.3
 
 # A single sample's squared error may exceed the mean squared limit by this much (its chi-square
 # tail with three degrees of freedom: P(s > 10 mse) < 1e-3 for Gaussian noise).
