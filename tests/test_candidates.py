@@ -770,7 +770,8 @@ def test_a_camera_the_views_do_not_pin_waits_for_more_motion():
     bank, _ = run(lambda j, X, rng: ([], np.zeros((0, 3)), [], []) if j < k + 90 else None, bank=bank,
                   start=k, params=params, pose=pose)
     assert bank.leader == held and bank.adoptions[0].time == pytest.approx(k * DT) and not bank.more_motion
-    assert [c.feature_id for c in bank.candidates] == [held] and held not in [c.feature_id for c in bank.archive]
+    assert [c.feature_id for c in bank.candidates] == [held]
+    assert held not in [c.feature_id for c in bank.archive]
     # Held back, then the held leader's point is not seen (no refined point) for 0.3 s: it is adopted,
     # with the lever it has (the motion that turned its face away will not pin the camera more).
     bank, k = run(lambda j, X, rng: frames(j, X, rng) if j < 240 else None, params=params, pose=pose)

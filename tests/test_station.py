@@ -289,7 +289,8 @@ def test_backdrop_gives_the_static_scene_corners():
 
 def test_the_pinned_camera_variant_is_hand_eye_with_its_keys():
     """``bench/hand_eye_pinned_camera.yaml`` (a variant measured in the README) is
-    ``diagrams/hand_eye.yaml`` with views, not frames, and the rotation lever: nothing else differs."""
+    ``diagrams/hand_eye.yaml`` with views, not frames, the rotation lever and the reach of the
+    identifying motion while waiting for it: nothing else differs."""
     base = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
     variant = load_scenario(ROOT / "bench" / "hand_eye_pinned_camera.yaml")
     keys = variant.hand_eye.candidates
@@ -297,4 +298,6 @@ def test_the_pinned_camera_variant_is_hand_eye_with_its_keys():
     assert variant.hand_eye.coordination.min_samples == 100
     keys.min_view_change, keys.min_rotation_lever = 0.0, 0.0
     variant.hand_eye.coordination.min_samples = base.hand_eye.coordination.min_samples
+    assert variant.hand_eye.identifying_motion_reach == 0.3
+    variant.hand_eye.identifying_motion_reach = base.hand_eye.identifying_motion_reach
     assert repr(variant) == repr(base)

@@ -365,7 +365,7 @@ class CandidateBank:
     turn: object | None = None  # the static scene's turn across that move (``step``'s scene_turn)
     turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
     reset_time: float = -math.inf  # s, when the last reset came
-    more_motion: bool = False  # a leader was held back (``min_rotation_lever``), none leads, one still converged
+    more_motion: bool = False  # a leader was held back (``min_rotation_lever``), none leads, one converged
     held_back: int = -1  # the feature id of the candidate held back (``min_rotation_lever``), -1: none
 
     def find(self, feature_id: int) -> Candidate | None:
@@ -596,7 +596,8 @@ def step(
     converged = [] if leader >= 0 else [c for c in kept if c.solution.verdict.converged]
     if converged or (unseen and held.solution.verdict.converged):
             if unseen and held.solution.verdict.converged:
-                best, confirmed = _solve(held, criteria, forgetting_factor, refine=True), True  # confirmed when held
+                best = _solve(held, criteria, forgetting_factor, refine=True)
+                confirmed = True  # when it was held back
                 archive = [c for c in archive if c.feature_id != held.feature_id]
                 kept = [c for c in kept if c.feature_id != held.feature_id] + [best]
             else:

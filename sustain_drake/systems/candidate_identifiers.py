@@ -143,8 +143,8 @@ class CandidateIdentifiers(LeafSystem):
     ``candidates`` (``candidates.CandidateBank``: every candidate, the leader, the adoptions).
     ``more_motion`` (1): 1 from a frame where a candidate converged and was confirmed but its
     points' views did not pin the camera's rotation (``params.min_rotation_lever``) until a leader
-    is chosen, a reset, or no converged candidate is left, else 0: the hand should move more widely (connect an
-    ``IdentifyingMotion``'s ``more_motion``).
+    is chosen, a reset, or no converged candidate is left, else 0: the hand should move more
+    widely (connect an ``IdentifyingMotion``'s ``more_motion``).
 
     State: the ``CandidateBank`` (abstract, immutable: contexts clone), updated every ``period``
     s (a periodic unrestricted update at the camera's rate).
