@@ -202,11 +202,15 @@ class CandidateParams:
             paper's). A point's measurement errors repeat with its view, so Eq. (1)'s sum over
             frames weighs each view by how long the arm held it (the detector's confirming trials
             and the pause after a convergence hold it for seconds) and the camera leans towards
-            the held views. The identification's counts (the criteria's ``min_samples``,
-            ``joint_min_samples``) then count views; the observation's (``observe_min_samples``,
-            ``keep_camera_min_samples``, ``turn_min_samples``, ``blind_min_samples``,
-            ``verified_overlap``) count the frames a point was tracked, as without it: they ask how
-            long a point has been followed, and a point waiting for views must not stop observing.
+            the held views. The counts of samples that fit a camera (the criteria's
+            ``min_samples``, ``joint_min_samples``, and ``observe_min_samples`` and
+            ``turn_min_samples`` for the camera re-found from kept tool points) then count views;
+            the observation's (``observe_min_samples`` for a point that confirms, witnesses or
+            observes, ``keep_camera_min_samples``, ``blind_min_samples``, ``verified_overlap``)
+            count the frames a point was tracked, as without it: they ask how long a point has been
+            followed, and a point waiting for views must not stop observing (seed 1's slip was
+            seen 2.9 s late when they counted views; with frames for the camera re-found after the
+            head move, seed 5's was 33 mm off).
         min_rotation_lever: m; > 0: a converged leader is adopted only when its points' views pin
             the camera's rotation: the smallest of their ``eye_to_hand.rotation_levers`` (with the
             joint refinement's points) at least this (0: no such test, the paper's rule).
@@ -924,7 +928,7 @@ def _camera_from_known_points(kept, known: dict, params: CandidateParams, adopte
     ``min_point_spread`` off a line. Returns ``(x, mse, feature_id)`` (the estimate with the ``p_HP``
     of the point nearest the adopted tool point in H, its mean squared error, that point) or None."""
     pairs = [(c, known[c.feature_id]) for c in kept
-             if c.feature_id in known and c.frames >= params.observe_min_samples]
+             if c.feature_id in known and c.solution.num_samples >= params.observe_min_samples]
     fit = _fit_dropping_misfits(pairs, lambda ps: camera_given_points(
         [_S(c.statistic) for c, _ in ps], np.array([p for _, p in ps])),
         params.observe_consistency**2 * adopted_mse)  # fmt: skip
@@ -946,7 +950,7 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     x0, turn, R_turned = bank.moved_from_x, bank.turn, bank.turned_R_WC
     R_WC0, p_WC0 = x0[0:9].reshape(3, 3, order="F"), x0[9:12]
     known_p = np.array(list(known.values()))
-    ready = [c for c in kept if c.frames >= params.turn_min_samples]
+    ready = [c for c in kept if c.solution.num_samples >= params.turn_min_samples]
     pairs = [(c, known[c.feature_id]) for c in ready if c.feature_id in known]
     # A new track (the turn ended the old one) is a known point seen from the turned camera at
     # the old position: off by the camera's unknown shift, the same for every track (over the same
