@@ -101,6 +101,9 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
                              "(the postures it may ask for)")  # fmt: skip
         if len(joint_ranges) != num_joints:
             raise ValueError(f"joint_ranges has {len(joint_ranges)} rows for num_joints = {num_joints}")
+        if not (hand_eye.identifying_motion_reach >= 0 and np.isfinite(hand_eye.identifying_motion_reach)):
+            raise ValueError("hand_eye.identifying_motion_reach must be >= 0 rad (0: off), got "
+                             f"{hand_eye.identifying_motion_reach}")
     criteria, rule = hand_eye.coordination.criteria(), hand_eye.coordination.rule()
     candidate_params = hand_eye.candidates.params()
     coincidence_params = perception.coincidence_params()

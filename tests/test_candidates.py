@@ -729,7 +729,7 @@ def test_a_held_view_is_one_sample_with_min_view_change():
     assert errors[0.002] < errors[0.0] / 3
 
 
-def test_a_camera_the_views_do_not_pin_waits_for_more_motion():
+def test_a_camera_the_views_do_not_pin_waits_for_more_motion(monkeypatch):
     """``min_rotation_lever``: the leader's camera is adopted only once its points' views pin the
     camera's rotation (``smallest_rotation_lever``); until then no leader and ``more_motion``. The
     hand turns within 0.05 rad and moves within 2 cm for 10 s, then moves richly. Held back
@@ -788,3 +788,12 @@ def test_a_camera_the_views_do_not_pin_waits_for_more_motion():
     assert adopted.feature_id == held and bank.leader == held
     assert adopted.time == pytest.approx(k * DT + 0.3, abs=1.5 * DT)  # not on the first frame unseen
     assert 0.005 < adopted.rotation_lever < params.min_rotation_lever and not bank.more_motion
+    # Held back while the hand holds still (min_view_change: no new sample): the leader is not
+    # judged again (its lever is as it was), and it stays held, more motion asked for.
+    bank, k = run(lambda j, X, rng: frames(j, X, rng) if j < 240 else None, params=params, pose=pose)
+    held, judged = bank.held_back, []
+    lever = candidates.smallest_rotation_lever
+    monkeypatch.setattr(candidates, "smallest_rotation_lever", lambda *a: judged.append(a) or lever(*a))
+    bank, _ = run(lambda j, X, rng: frames(j, X, rng) if j < k + 30 else None, bank=bank, start=k,
+                  params=replace(params, min_view_change=0.001), pose=lambda j: pose(k))
+    assert judged == [] and bank.leader < 0 and bank.held_back == held and bank.more_motion

@@ -2,6 +2,8 @@
 MultibodyPlant API, fed by scripted sensors (postures, images, the static wrench of a known
 payload)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
@@ -181,6 +183,10 @@ def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
         make_sustainable_coordination(info, 6, hand_eye=babbling)
     with pytest.raises(ValueError, match="joint_ranges has 5 rows for num_joints = 6"):
         make_sustainable_coordination(info, 6, hand_eye=babbling, joint_ranges=[[-1.0, 1.0]] * 5)
+    for reach in (-0.3, float("nan")):
+        with pytest.raises(ValueError, match="identifying_motion_reach must be >= 0 rad"):
+            make_sustainable_coordination(info, 6, hand_eye=replace(babbling, identifying_motion_reach=reach),
+                                          joint_ranges=[[-1.0, 1.0]] * 6)
     with_motion = make_sustainable_coordination(info, 6, hand_eye=babbling, joint_ranges=[[-1.0, 1.0]] * 6)
     assert with_motion.GetOutputPort("motion_confirm").size() == 2 + 6
     assert with_motion.GetSubsystemByName("identifying_motion") is not None

@@ -596,14 +596,19 @@ def step(
             if leader < 0 and bank.held_back >= 0 else None)  # fmt: skip
     unseen = held is not None and (row.get(held.feature_id) is None
                                    or frame_time - held.last_sample > _HELD_UNSEEN_TIME)
-    # The first to converge leads (the smallest expected error among simultaneous ones).
-    converged = [] if leader >= 0 else [c for c in kept if c.solution.verdict.converged]
-    if converged or (unseen and held.solution.verdict.converged):
-            if unseen and held.solution.verdict.converged:
+    adopt_held = unseen and held.solution.verdict.converged
+    if adopt_held and all(c.feature_id != held.feature_id for c in kept):  # its track ended: from the archive
+        archive = [c for c in archive if c.feature_id != held.feature_id]
+        kept.append(held)
+    # The first to converge leads (the smallest expected error among simultaneous ones). A leader
+    # held back on an earlier frame is judged again only when a candidate gained a sample: else
+    # the statistics, and so its lever, are as they were.
+    converged = ([] if leader >= 0 or (bank.held_back >= 0 and not fed and not adopt_held)
+                 else [c for c in kept if c.solution.verdict.converged])
+    if converged:
+            if adopt_held:
                 best = _solve(held, criteria, forgetting_factor, refine=True)
                 confirmed = True  # when it was held back
-                archive = [c for c in archive if c.feature_id != held.feature_id]
-                kept = [c for c in kept if c.feature_id != held.feature_id] + [best]
             else:
                 best = min(converged, key=lambda c: c.solution.expected_mse)
                 best = _solve(best, criteria, forgetting_factor, refine=True)
