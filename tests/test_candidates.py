@@ -797,3 +797,61 @@ def test_a_camera_the_views_do_not_pin_waits_for_more_motion(monkeypatch):
     bank, _ = run(lambda j, X, rng: frames(j, X, rng) if j < k + 30 else None, bank=bank, start=k,
                   params=replace(params, min_view_change=0.001), pose=lambda j: pose(k))
     assert judged == [] and bank.leader < 0 and bank.held_back == held and bank.more_motion
+
+
+def test_a_tracked_point_asks_for_more_motion_with_motion_min_samples():
+    """``motion_min_samples``: once a candidate has that many samples and none leads, more motion is
+    asked for (the confirming trials found a point to identify); not before, not once one leads,
+    and never with the key off."""
+    def frames(k, X, rng):
+        return None if k >= 200 else ([4], [seen(X, P_TOOL, rng)], [True], [True])
+
+    def asks(params, stop):
+        bank, _ = run(lambda k, X, rng: frames(k, X, rng) if k < stop else None, params=params)
+        return bank, bank.more_motion
+
+    params = replace(PARAMS, motion_min_samples=30)
+    assert not asks(params, 29)[1]
+    bank, more = asks(params, 31)
+    assert more and bank.leader < 0 and bank.find(4).solution.num_samples >= 30
+    bank, more = asks(params, 200)
+    assert bank.leader == 4 and not more  # identified: the motion is the state machine's again
+    # After a change (a reset) the model is re-found from the far postures: no ask.
+    again, _ = run(lambda k, X, rng: frames(k - 200, X, rng) if k < 260 else None, bank=bank, reset=200 * DT,
+                   start=200, params=params)
+    assert again.leader < 0 and again.find(4).solution.num_samples >= 30 and not again.more_motion
+    assert not any(asks(PARAMS, stop)[1] for stop in (31, 120))
+    with pytest.raises(ValueError, match="motion_min_samples"):
+        replace(PARAMS, motion_min_samples=-1)
+
+
+def test_joint_consistency_leaves_out_a_point_with_an_error_of_its_own():
+    """``joint_consistency``: a point whose measurements carry an error of their own that follows
+    the motion (5 mm along the camera's x, varying with the hand's travel: a track sliding on its
+    mark) fits the leader's camera at about 2.3 times the leader's RMS error. At 3 it joins the
+    joint refinement and turns the camera; at 2 it is left out, and the camera is the good points'."""
+    def track(feature_id, p_HP, rng, drift=0.0):
+        identifier = EyeToHandIdentifier()
+        for k in range(300):
+            X = hand_pose(k)
+            p = seen(X, p_HP, rng, noise=1e-3) + [drift * math.sin(0.5 * k * DT), 0.0, 0.0]
+            identifier.add(p, X[:3, :3], X[:3, 3])
+        return candidates.Candidate(feature_id, identifier.state, identifier.solve(), 0.0, 0.0)
+
+    rng = np.random.default_rng(0)
+    leader = track(1, P_TOOL, rng)
+    good = track(2, P_TOOL + [0.03, -0.02, 0.04], rng)
+    stray = track(3, P_TOOL + [0.0, 0.03, 0.02], rng, 0.005)
+    R, p_WC = leader.solution.estimate.R_WC, leader.solution.estimate.p_WC
+    rms = [math.sqrt(candidates.mean_squared_error_of(c.statistic, pack_x(
+        R, p_WC, candidates.best_p_HP_given_camera(c.statistic, R, p_WC)))) for c in (leader, good, stray)]
+    assert rms[1] < 1.3 * rms[0] and 2.0 * rms[0] < rms[2] < 3.0 * rms[0]
+    errors = {}
+    for consistency, members in ((3.0, 3), (2.0, 2)):
+        best, points = candidates._joint_refined(leader, [good, stray], [], CandidateParams(
+            joint=True, joint_consistency=consistency))
+        assert len(points) == members
+        errors[consistency] = np.linalg.norm(best.solution.estimate.p_WC - TRUTH.X_WC[:3, 3])
+    assert errors[2.0] < errors[3.0] / 2
+    with pytest.raises(ValueError, match="joint_consistency"):
+        CandidateParams(joint_consistency=0.0)

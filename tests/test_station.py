@@ -300,4 +300,10 @@ def test_the_pinned_camera_variant_is_hand_eye_with_its_keys():
     variant.hand_eye.coordination.min_samples = base.hand_eye.coordination.min_samples
     assert variant.hand_eye.identifying_motion_reach == 0.3
     variant.hand_eye.identifying_motion_reach = base.hand_eye.identifying_motion_reach
+    # Measured before the reach came from the first tracked point and the joint's own consistency:
+    # those keys at their defaults (off, 3), as then.
+    assert (keys.motion_min_samples, keys.joint_consistency) == (0, 3.0)
+    keys.motion_min_samples, keys.joint_consistency = 30, 2.0
+    shipped = base.hand_eye.candidates
+    assert (shipped.motion_min_samples, shipped.joint_consistency) == (30, 2.0)
     assert repr(variant) == repr(base)

@@ -114,6 +114,11 @@ class CandidateParams:
             paper, which uses one point): a mark on one face of the tool is tracked over a few
             tenths of a radian of hand rotation only, and the points together saw more.
         joint_min_samples: samples a candidate needs to join the joint refinement.
+        joint_consistency: a candidate joins the joint refinement when its RMS error (with its best
+            ``p_HP``) is within this many times the leader's, under the leader's camera and then the
+            joint one. A point tracked with an error of its own (seen: 2.2 times the leader's, its
+            own camera 37 mm off) turns the joint camera by 0.1 deg at 3 and is left out at 2, where
+            the rod's points with the leader lie within 1.0-1.4 times.
         max_archived: candidates kept after their track ended (their statistic is still a valid
             constraint on the camera) for the joint refinement, the most samples first.
         max_observers: consistent points observed besides the observed point and its witness
@@ -217,6 +222,12 @@ class CandidateParams:
             Otherwise it waits for more of the motion (``CandidateBank.more_motion``) as long as its
             point is seen: once its track ends or it has had no refined point for 0.3 s, it is
             adopted with the lever it has.
+        motion_min_samples: > 0: until the first identification, more motion is asked for
+            (``CandidateBank.more_motion``) once a candidate has this many samples: the detector's
+            confirming trials, which hold the arm near one posture, have found a point to identify,
+            and the camera's rotation is pinned only as the hand moves (0: not for this). Not after
+            a change: the kept camera and the scene's turn re-find the model from the far postures
+            (with it, seed 1's head move was re-found 15.7 s after its detection, not 0.9 s).
     """
 
     max_candidates: int = 8
@@ -238,6 +249,7 @@ class CandidateParams:
     min_rotation_spread: float = 0.15
     joint: bool = False
     joint_min_samples: int = 30
+    joint_consistency: float = 3.0
     max_archived: int = 16
     max_observers: int = 0
     refine_interval: float = 0.0
@@ -255,15 +267,17 @@ class CandidateParams:
     turn_min_samples: int = 15
     min_view_change: float = 0.0
     min_rotation_lever: float = 0.0
+    motion_min_samples: int = 0
 
     def __post_init__(self):
         counts = (self.observe_min_samples, self.keep_camera_min_samples, self.primary_failures,
                   self.joint_min_samples, self.turn_min_samples)
         if not (min(counts) >= 1 and self.max_archived >= 0 and self.max_observers >= 0
-                and self.blind_min_samples >= 0 and self.verified_overlap >= 0):
+                and self.blind_min_samples >= 0 and self.verified_overlap >= 0
+                and self.motion_min_samples >= 0):
             raise ValueError("observe_min_samples, keep_camera_min_samples, primary_failures, "
-                             "joint_min_samples and turn_min_samples must be >= 1; "
-                             "max_archived, max_observers, blind_min_samples and verified_overlap "
+                             "joint_min_samples and turn_min_samples must be >= 1; max_archived, "
+                             "max_observers, blind_min_samples, verified_overlap and motion_min_samples "
                              f">= 0 ({self})")
         if not self.max_candidates >= 1:
             raise ValueError(f"max_candidates must be >= 1, got {self.max_candidates}")
@@ -277,7 +291,8 @@ class CandidateParams:
                 raise ValueError(f"{name} must be >= 0, got {value}")
         for name in ("max_hand_radius", "gate_margin", "max_lost_time", "max_unconverged_time",
                      "reacquire_radius", "pose_tolerance", "reject_rms", "observation_jump",
-                     "min_rotation_spread", "min_point_spread", "turn_radius", "turn_max_shift"):
+                     "joint_consistency", "min_rotation_spread", "min_point_spread", "turn_radius",
+                     "turn_max_shift"):
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a positive number, got {value}")
@@ -671,7 +686,9 @@ def step(
     new_leader = leader != bank.leader
     # Once a leader was held back for min_rotation_lever, more motion is wanted until one leads or
     # no converged candidate is left (then the detector's trials must find new body features).
-    more_motion = leader < 0 and (held_back or (bank.more_motion and any(
+    first_point = params.motion_min_samples > 0 and not adoptions and any(
+        c.solution.num_samples >= params.motion_min_samples for c in kept)
+    more_motion = leader < 0 and (held_back or first_point or (bank.more_motion and any(
         c.solution.verdict.converged for c in kept)))
     held_id = (best.feature_id if held_back
                else bank.held_back if leader < 0 and held is not None and not unseen else -1)
@@ -751,7 +768,7 @@ def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> t
     """``params.joint``: the leader's camera refined jointly with every other candidate (tracked
     or archived, ``joint_min_samples`` samples) that it explains (``eye_to_hand.refine_joint``:
     one camera, one ``p_HP`` per point). Members are the points whose own mean squared error
-    (with their best ``p_HP``) is within ``observe_consistency^2`` times the leader's, first under
+    (with their best ``p_HP``) is within ``joint_consistency^2`` times the leader's, first under
     the leader's camera, then again under the joint one (three times with ``stitch_radius``: the
     groups of tracks of one point are formed again under each better camera). Returns the leader
     with the joint camera and its own ``p_HP`` (its group's, when stitched; its verdict and
@@ -763,7 +780,7 @@ def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> t
     others = [c for c in list(kept) + list(archive)
               if c.feature_id != best.feature_id and c.solution.num_samples >= params.joint_min_samples]
     R, p_WC = estimate.R_WC, estimate.p_WC
-    limit = params.observe_consistency**2 * max(best.solution.expected_mse, 1e-12)
+    limit = params.joint_consistency**2 * max(best.solution.expected_mse, 1e-12)
     members = []
     for _ in range(3 if params.stitch_radius > 0 else 2):
         members = [c for c in others if mean_squared_error_of(

@@ -10,10 +10,10 @@ from sustain_drake.identification import coordination
 
 # State vector: [output id, last detector id seen, time of the last request (own or detector's),
 # own requests so far, since when the arm stays near one posture, time of the last request made
-# over the detector's, 1 once the state machine has observed], that posture (n), then the output
-# request [joint, q_1..q_n].
-_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED, _HAS_OBSERVED = range(7)
-_POSTURE = 7
+# over the detector's, 1 once the state machine has observed, 1 while the postures within reach are
+# drawn about the anchor], that posture (n), the anchor (n), then the output request [joint, q_1..q_n].
+_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED, _HAS_OBSERVED, _ANCHORED = range(8)
+_POSTURE = 8
 _REACHED = 0.05  # rad (max-norm): the arm is at a requested posture
 _NEAR = 0.2  # rad (max-norm): the arm stays near one posture (the confirming trials' reach)
 
@@ -35,8 +35,10 @@ class IdentifyingMotion(LeafSystem):
     the candidates come from are what those trials find (forcing far postures from the start found
     seed 1's first tool point at 29.5 s, not 6 s, and delayed seed 2's first convergence to 40 s).
     With ``more_motion_reach`` (rad), postures asked for while ``more_motion`` is set are drawn
-    within that reach (max-norm) of the current one, and come after one ``interval`` near a posture,
-    not ``max_hold``: the far postures end the tracks of the points that wait for more motion.
+    within that reach (max-norm) of the posture the arm had when it was set (the anchor: there the
+    points were seen; a walk from posture to posture drifts until their faces turn away), the
+    farthest from the current one of ``num_draws``, and come after one ``interval`` near a posture,
+    not ``max_hold``: the far postures end the tracks of the points that want more motion.
 
     .. pydrake_system::
 
@@ -81,11 +83,12 @@ class IdentifyingMotion(LeafSystem):
         self._mode = self.DeclareVectorInputPort("mode", 1)
         self._q = self.DeclareVectorInputPort("joint_positions", n)
         self._more = self.DeclareVectorInputPort("more_motion", 1)
-        self._request = _POSTURE + n  # where the output request starts in the state
+        self._anchor = _POSTURE + n
+        self._request = self._anchor + n  # where the output request starts in the state
         initial = np.zeros(self._request + 1 + n)
         initial[self._request] = -1.0  # the output request's joint: -1, a usual move
         initial[_LAST_FORCED] = -np.inf
-        initial[_POSTURE:self._request] = np.inf  # no posture yet: the first sets it
+        initial[_POSTURE:self._anchor] = np.inf  # no posture yet: the first sets it
         self._state = self.DeclareDiscreteState(initial)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort(
@@ -102,8 +105,8 @@ class IdentifyingMotion(LeafSystem):
         request = self._detector.Eval(context) if self._detector.HasValue(context) else x[[_DETECTOR_ID]]
         identifying = int(self._mode.Eval(context)[0]) == coordination.IDENTIFY
         q = np.asarray(self._q.Eval(context), float)
-        if not np.max(np.abs(q - x[_POSTURE:self._request])) <= _NEAR:
-            x[_POSTURE:self._request], x[_NEAR_SINCE] = q, t  # the arm left: a new posture
+        if not np.max(np.abs(q - x[_POSTURE:self._anchor])) <= _NEAR:
+            x[_POSTURE:self._anchor], x[_NEAR_SINCE] = q, t  # the arm left: a new posture
         # While identifying again, a far posture when the arm stayed near one for max_hold (however often
         # the detector asks); it has the arm until it is there (the detector's request stays
         # pending till then), for max_hold at most.
@@ -112,6 +115,10 @@ class IdentifyingMotion(LeafSystem):
         # With a reach, the identifiers' ask is met at once (after one interval near a posture) by
         # postures within reach: their points' tracks must live through it.
         gentle = asked and self._reach is not None
+        if not gentle:
+            x[_ANCHORED] = 0.0
+        elif not x[_ANCHORED]:  # where the points that want more motion are seen
+            x[self._anchor:self._request], x[_ANCHORED] = np.clip(q, *self._ranges.T), 1.0
         hold = self._interval if gentle else self._max_hold
         overdue = (identifying and (x[_HAS_OBSERVED] > 0 or asked) and t - x[_NEAR_SINCE] >= hold
                    and t - x[_LAST_FORCED] >= hold)
@@ -128,7 +135,7 @@ class IdentifyingMotion(LeafSystem):
             rng = np.random.default_rng([self._seed, int(x[_OWN])])
             low, high = self._ranges[:, 0], self._ranges[:, 1]
             if gentle:
-                centre = np.clip(q, low, high)  # an arm just outside its ranges still gets a box in them
+                centre = x[self._anchor:self._request]
                 low, high = np.maximum(low, centre - self._reach), np.minimum(high, centre + self._reach)
             draws = rng.uniform(low, high, (self._draws, q.size))
             far = draws[np.argmax(np.max(np.abs(draws - q), axis=1))]
