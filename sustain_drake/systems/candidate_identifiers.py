@@ -141,10 +141,11 @@ class CandidateIdentifiers(LeafSystem):
     ``observation`` is ``[sample_count, s_t]`` of the observed feature (the leader's, or a
     re-acquired one) under ``reference_x``, m^2; ``X_WC`` (RigidTransform), ``p_HP`` (3, m);
     ``candidates`` (``candidates.CandidateBank``: every candidate, the leader, the adoptions).
-    ``more_motion`` (1): 1 from a frame where a candidate converged and was confirmed but its
-    points' views did not pin the camera's rotation (``params.min_rotation_lever``) until a leader
-    is chosen, a reset, or no converged candidate is left, else 0: the hand should move more
-    widely (connect an ``IdentifyingMotion``'s ``more_motion``).
+    ``more_motion`` (1): 1 while no candidate leads and either, before the first identification, a
+    candidate has ``params.motion_min_samples`` samples, or (from a frame where a candidate
+    converged and was confirmed but its points' views did not pin the camera's rotation,
+    ``params.min_rotation_lever``) until a leader is chosen, a reset, or no converged candidate is
+    left; else 0: the hand should move more (connect an ``IdentifyingMotion``'s ``more_motion``).
 
     State: the ``CandidateBank`` (abstract, immutable: contexts clone), updated every ``period``
     s (a periodic unrestricted update at the camera's rate).

@@ -31,7 +31,8 @@ class IdentifyingMotion(LeafSystem):
     confirming trials can follow each other for tens of seconds (after the slip of
     ``hand_eye.yaml`` with seed 1: 55 s within 0.1 rad of one posture), and then nothing converges.
     Before the first convergence only while the identifiers ask for more motion (``more_motion``:
-    their points converged but do not pin the camera's rotation yet): until then the body features
+    a point has been tracked for a while, or points converged that do not pin the camera's
+    rotation yet): until then the body features
     the candidates come from are what those trials find (forcing far postures from the start found
     seed 1's first tool point at 29.5 s, not 6 s, and delayed seed 2's first convergence to 40 s).
     With ``more_motion_reach`` (rad), postures asked for while ``more_motion`` is set are drawn
@@ -118,6 +119,7 @@ class IdentifyingMotion(LeafSystem):
         if not gentle:
             x[_ANCHORED] = 0.0
         elif not x[_ANCHORED]:  # where the points that want more motion are seen
+            # (an arm just outside its ranges still gets a box in them)
             x[self._anchor:self._request], x[_ANCHORED] = np.clip(q, *self._ranges.T), 1.0
         hold = self._interval if gentle else self._max_hold
         overdue = (identifying and (x[_HAS_OBSERVED] > 0 or asked) and t - x[_NEAR_SINCE] >= hold
