@@ -115,6 +115,23 @@ def test_with_a_reach_the_identifiers_ask_is_met_at_once_within_reach():
         IdentifyingMotion(RANGES, interval=1.0, more_motion_reach=0.0)
 
 
+def test_the_anchor_is_set_anew_each_time_the_identifiers_ask_again():
+    """An ask that ends (3 s: the detector's requests take the arm to its posture Q) and comes back
+    (6 s): the postures asked for after it are within the reach of where the arm is then (Q), not of
+    the first anchor (the arm's start, 0.4-0.5 rad from Q on three joints)."""
+    postures = []
+    _chatty_detector(observed_before=0.0, more_motion=lambda t: float(not 3.0 <= t < 6.0), reach=0.1,
+                     postures=postures)
+    lower, upper = np.array(RANGES).T
+    first_anchor = np.clip(postures[0][0], lower, upper)
+    before = [requested for q, requested in postures if np.max(np.abs(q - Q)) > 0.2]
+    again = [(q, requested) for q, requested in postures if np.max(np.abs(q - Q)) <= 0.2]
+    assert len(before) >= 1 and len(again) >= 3
+    assert max(np.max(np.abs(r - first_anchor)) for r in before) <= 0.1 + 1e-9
+    assert max(np.max(np.abs(r - Q)) for _, r in again) <= 0.1 + 1e-9  # the new anchor: Q
+    assert min(np.max(np.abs(r - first_anchor)) for _, r in again) > 0.3
+
+
 def _chatty_detector(observed_before, more_motion=None, reach=None, postures=None):
     """The requests made over 10 s (time, joint), the own ones' and the detector's times; with a
     list ``postures``, each own request's ``(arm's posture, requested posture)`` is appended."""
@@ -131,7 +148,7 @@ def _chatty_detector(observed_before, more_motion=None, reach=None, postures=Non
     builder.Connect(posture.get_output_port(), arm.get_input_port())
     builder.Connect(arm.get_output_port(), motion.GetInputPort("joint_positions"))
     if more_motion is not None:
-        more = builder.AddSystem(ConstantVectorSource([more_motion]))
+        more = builder.AddSystem(Asking(more_motion if callable(more_motion) else lambda t: more_motion))
         builder.Connect(more.get_output_port(), motion.GetInputPort("more_motion"))
     simulator = Simulator(builder.Build())
     joints = []
@@ -153,3 +170,11 @@ class Chatty(LeafSystem):
         super().__init__()
         self.DeclareVectorOutputPort("confirm", 7, lambda c, o: o.SetFromVector(
             [1.0 + np.floor(c.get_time() / 0.5), 2.0, *Q]))  # fmt: skip
+
+
+class Asking(LeafSystem):
+    """The identifiers' ``more_motion``: ``asks(t)``."""
+
+    def __init__(self, asks):
+        super().__init__()
+        self.DeclareVectorOutputPort("more_motion", 1, lambda c, o: o.SetAtIndex(0, asks(c.get_time())))
