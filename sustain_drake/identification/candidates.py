@@ -1067,9 +1067,9 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     (``params.max_observers``, the points nearest the adopted tool point first): every consistent
     point tracked now gives its own ``s_t`` under the adopted camera with its own ``p_HP``. The
     points within ``observe_radius`` of the tool point (the tool's) and the others (the hand's) are
-    two groups; the reported ``s_t`` is the larger of the groups' lower medians. A change of the
-    body moves every point of its group (a slipped tool the tool's, a moved camera all), a tracking
-    failure one; and while the observed point is lost (its face turned away, or its track ended in
+    two groups; the reported ``s_t`` is the larger of the groups' lower medians (the hand's, when it
+    is one point, only in a frame without a tool point). A change of the body moves every point of
+    its group (a slipped tool the tool's, a moved camera all), a tracking failure one; and while the observed point is lost (its face turned away, or its track ended in
     the change itself) the observers keep the observation going, so a change is not missed for
     want of the one point the paper observes.
 
@@ -1170,7 +1170,12 @@ def _observe_points(bank, params, time, X_WH, ids, p_CP, usable, body, row, refe
     # two) is the paper's; with three or more, a point that fails alone (a track that slid, a
     # point re-acquired near the prediction by chance) moves it neither up nor down. The larger of
     # the two groups' is reported: a slipped tool moves the tool's points only, a moved camera all.
-    reported = max(_lower_median([e for e, tool in errors if tool == group]) for group in (True, False))
+    # The hand's points fail only with a moved camera, which moves the tool's too: while a tool
+    # point is seen, a hand group of one point speaks only with the tool's (its track sliding onto
+    # the background is not a change).
+    tool = [e for e, on_tool in errors if on_tool]
+    hand = [e for e, on_tool in errors if not on_tool]
+    reported = max(_lower_median(tool), _lower_median(hand) if len(hand) >= 2 or not tool else -math.inf)
     return replace(bank, sample_count=before + 1, sample_error=reported,
                    tool_observed=any(tool for _, tool in errors))
 
