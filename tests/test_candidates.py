@@ -437,7 +437,8 @@ def test_a_lone_point_of_the_hand_that_slides_away_is_a_tracking_failure_while_t
                     a = min((k - 480) / 20.0, 1.0)
                     p[j] = (1 - a) * p[j] + a * background
             bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
-                                   np.ones(len(ids), bool), np.ones(len(ids), bool), x_true, allowable_error=1e-4)
+                                   np.ones(len(ids), bool), np.ones(len(ids), bool), x_true,
+                                   allowable_error=1e-4)
             out[k] = (bank.sample_count, bank.sample_error, {o[0] for o in bank.observers})
         return out
 

@@ -196,6 +196,11 @@ class CandidateParams:
             marks lie 15-20 mm apart). The offset is the tracked-through points' own, or
             the one that most new tracks (at least two) agree on (``_common_offset``). The points
             must fit the camera within ``observe_consistency`` of the adopted RMS error, as above.
+        turn_scene_shift: m; when the scene's depth on both sides of the move gives the camera's
+            shift too (``camera_after_turn`` without tool samples), new tracks are matched under
+            the camera at that position, the common offset searched within this of it (not
+            ``turn_max_shift`` of the old one: an offset as long as the marks' spacing maps tracks
+            of unknown marks onto their known neighbours) and one new track suffices.
         min_point_spread: m, how far the known points' samples must lie from a line in the camera
             frame (their RMS distance from their principal line, ``keep_tool_points``): an error e
             of a kept ``p_HP`` (learned under the previous camera) turns the new camera by about e
@@ -267,6 +272,7 @@ class CandidateParams:
     turn_radius: float = 0.004
     turn_max_shift: float = 0.03
     turn_min_samples: int = 15
+    turn_scene_shift: float = 0.01
     min_view_change: float = 0.0
     min_rotation_lever: float = 0.0
     motion_min_samples: int = 0
@@ -294,7 +300,7 @@ class CandidateParams:
         for name in ("max_hand_radius", "gate_margin", "max_lost_time", "max_unconverged_time",
                      "reacquire_radius", "pose_tolerance", "reject_rms", "observation_jump",
                      "joint_consistency", "min_rotation_spread", "min_point_spread", "turn_radius",
-                     "turn_max_shift"):
+                     "turn_max_shift", "turn_scene_shift"):
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a positive number, got {value}")
@@ -385,6 +391,7 @@ class CandidateBank:
     moved_at: float = math.nan  # s, when that reset came
     turn: object | None = None  # the static scene's turn across that move (``step``'s scene_turn)
     turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
+    turned_p_WC: np.ndarray | None = None  # and where the scene's depth puts it (None: not known)
     reset_time: float = -math.inf  # s, when the last reset came
     more_motion: bool = False  # a leader was held back (``min_rotation_lever``), none leads, one converged
     held_back: int = -1  # the feature id of the candidate held back (``min_rotation_lever``), -1: none
@@ -511,7 +518,7 @@ def step(
             moved_from, moved_at = None, math.nan
         bank = replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
                        known_points=known, model_x=None, moved_from_x=moved_from, moved_at=moved_at,
-                       turn=None, turned_R_WC=None, reset_time=float(time),
+                       turn=None, turned_R_WC=None, turned_p_WC=None, reset_time=float(time),
                        last_reset=float(reset), round_start=math.nan,
                        observed_last=None, observed_p_HP=None,
                        witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
@@ -524,8 +531,9 @@ def step(
         # to match new tracks to the known points on every frame until one leads.
         x0 = bank.moved_from_x
         turned = camera_after_turn(x0[0:9].reshape(3, 3, order="F"), x0[9:12], scene_turn.b0, scene_turn.q0,
-                                   scene_turn.b1, [], [])
-        bank = replace(bank, turn=scene_turn, turned_R_WC=None if turned is None else turned[0])
+                                   scene_turn.b1, [], [], q1=scene_turn.q1)
+        bank = replace(bank, turn=scene_turn, turned_R_WC=None if turned is None else turned.R_WC,
+                       turned_p_WC=turned.p_WC if turned is not None and turned.scene_shift else None)
     if bank.leader >= 0 and x_is_set(reference_x):
         bank = replace(bank, model_x=np.array(reference_x, dtype=float))
     if not frame_time > bank.last_frame:
@@ -967,12 +975,15 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     (``camera_after_turn``). The points: candidates with ``turn_min_samples`` samples that are a
     known point, by id (tracked through the move) or by ``p_HP`` (``turn_radius``, see
     ``CandidateParams``), fitted with ``_fit_dropping_misfits``. Returns ``(x, mse, feature_id)``
-    as ``_camera_from_known_points`` or None."""
+    as ``_camera_from_known_points`` or None. With the scene's shift (``turned_p_WC``), the tracks
+    are matched under the camera there, within ``turn_scene_shift``, one new track sufficing."""
     if bank.turned_R_WC is None:
         return None  # too few anchors in the turn
     known = dict(bank.known_points)
     x0, turn, R_turned = bank.moved_from_x, bank.turn, bank.turned_R_WC
     R_WC0, p_WC0 = x0[0:9].reshape(3, 3, order="F"), x0[9:12]
+    shifted = bank.turned_p_WC is not None
+    p_turned = bank.turned_p_WC if shifted else p_WC0
     known_p = np.array(list(known.values()))
     ready = [c for c in kept if c.solution.num_samples >= params.turn_min_samples]
     pairs = [(c, known[c.feature_id]) for c in ready if c.feature_id in known]
@@ -981,9 +992,10 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     # time), so the shift is the offset most new tracks agree on.
     new = [c for c in ready if c.feature_id not in known
            and rotation_spread(c.statistic) >= params.min_rotation_spread]  # else a point of any link fits
-    guesses = np.array([best_p_HP_given_camera(c.statistic, R_turned, p_WC0) for c in new]).reshape(-1, 3)
-    tracked = [best_p_HP_given_camera(c.statistic, R_turned, p_WC0) - p for c, p in pairs]
-    offset = _common_offset(guesses, known_p, tracked, params)
+    guesses = np.array([best_p_HP_given_camera(c.statistic, R_turned, p_turned) for c in new]).reshape(-1, 3)
+    tracked = [best_p_HP_given_camera(c.statistic, R_turned, p_turned) - p for c, p in pairs]
+    window = params.turn_scene_shift if shifted else params.turn_max_shift
+    offset = _common_offset(guesses, known_p, tracked, params, window, 1 if shifted else 2)
     if offset is not None:
         for c, guess in zip(new, guesses, strict=True):
             distance = np.linalg.norm(known_p - (guess - offset), axis=1)
@@ -1000,17 +1012,19 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     return _leading(fit[1], fit[2], fit[0], known_p[0])
 
 
-def _common_offset(guesses: np.ndarray, known_p: np.ndarray, tracked: list, params: CandidateParams):
+def _common_offset(guesses: np.ndarray, known_p: np.ndarray, tracked: list, params: CandidateParams,
+                   max_shift: float, min_support: int):
     """The offset (in H) between new tracks' ``p_HP`` under the turned camera (``guesses``) and the
     known points: the median offset of the points tracked through the move (``tracked``, their
-    own offsets) if any; else, among the offsets within ``turn_max_shift`` of a guess to a known
-    point, the one that the most guesses fit within ``turn_radius`` (at least two: one track fits
-    some mark for many shifts), the smallest of those. None if none."""
+    own offsets) if any; else, among the offsets within ``max_shift`` of a guess to a known
+    point, the one that the most guesses fit within ``turn_radius`` (at least ``min_support``: with
+    the camera's shift unknown, two, as one track fits some mark for many shifts), the smallest of
+    those. None if none."""
     if tracked:
         return np.median(np.array(tracked), axis=0)
     options = (guesses[:, None, :] - known_p[None, :, :]).reshape(-1, 3)
-    options = options[np.linalg.norm(options, axis=1) <= params.turn_max_shift]
-    best, support = None, 1
+    options = options[np.linalg.norm(options, axis=1) <= max_shift]
+    best, support = None, min_support - 1
     for o in sorted(options, key=lambda o: float(np.linalg.norm(o))):
         fits = np.linalg.norm(guesses[:, None, :] - o - known_p[None, :, :], axis=2).min(axis=1)
         n = int(np.count_nonzero(fits <= params.turn_radius))
@@ -1069,9 +1083,10 @@ def _observe(bank, params, time, X_WH, ids, p_CP, usable, body, row, reference_x
     points within ``observe_radius`` of the tool point (the tool's) and the others (the hand's) are
     two groups; the reported ``s_t`` is the larger of the groups' lower medians (the hand's, when it
     is one point, only in a frame without a tool point). A change of the body moves every point of
-    its group (a slipped tool the tool's, a moved camera all), a tracking failure one; and while the observed point is lost (its face turned away, or its track ended in
-    the change itself) the observers keep the observation going, so a change is not missed for
-    want of the one point the paper observes.
+    its group (a slipped tool the tool's, a moved camera all), a tracking failure one; and while
+    the observed point is lost (its face turned away, or its track ended in the change itself) the
+    observers keep the observation going, so a change is not missed for want of the one point the
+    paper observes.
 
     A frame whose sample includes a tool point within the allowable error *verifies* the model:
     every candidate's samples so far count as taken under a verified model (``verified_overlap``).

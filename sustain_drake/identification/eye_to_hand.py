@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -469,9 +469,56 @@ def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):
     return R, p_WC, spread
 
 
+class CameraAfterTurn(NamedTuple):
+    """``camera_after_turn``'s answer: the camera (``R_WC``, ``p_WC``), the anchors' RMS direction
+    misfit (rad) and how many anchors fitted; ``scene_shift``: the position is the static scene's
+    (from the anchors' depth on both sides of the move), not the old one left where it was."""
+
+    R_WC: np.ndarray
+    p_WC: np.ndarray
+    rms_angle: float
+    num_anchors: int
+    scene_shift: bool
+
+
+def _scene_registration(R, p, b0, q0, b1, q1, far, inliers, used, steps: int = 3):
+    """The turn ``R_C0C1`` and shift ``p_C0C1`` that fit the anchors' bearings (``inliers``) and their
+    depth on both sides (``used``) together, by Gauss-Newton from ``(R, p)``. The bearings alone
+    leave a valley: a turn and a shift along it move a scene at one depth alike; the depth (each
+    anchor's ``q0 - R q1 - p``, its noise growing with the depth) tells them apart. Each kind of
+    residual is weighted by its robust scale (1.48 MAD; the depth's scaled by ``z^2``), and depth
+    misfits over three scales are left out (an anchor on a moving thing, a depth edge)."""
+    z = np.maximum(np.linalg.norm(q1, axis=1), 0.1)
+    for _ in range(steps):
+        c = np.where(far[:, None], b0, q0 - p)
+        norm = np.linalg.norm(c, axis=1, keepdims=True)
+        c = c / norm
+        r_b = c - b1 @ R.T  # bearing misfit (rad)
+        r_d = q0 - q1 @ R.T - p  # depth misfit (m)
+        J_b = np.zeros((len(c), 3, 6))
+        J_b[:, :, :3] = np.einsum("ij,njk->nik", R, np.array([skew(v) for v in b1]))
+        near = ~far
+        J_b[near, :, 3:] = -(np.eye(3) - c[near, :, None] * c[near, None, :]) / norm[near, :, None]
+        J_d = np.zeros((len(c), 3, 6))
+        J_d[:, :, :3] = np.einsum("ij,njk->nik", R, np.array([skew(v) for v in np.nan_to_num(q1)]))
+        J_d[:, :, 3:] = -np.eye(3)
+        e_b = np.linalg.norm(r_b, axis=1)
+        e_d = np.linalg.norm(np.nan_to_num(r_d), axis=1) / z**2
+        s_b = max(1.4826 * float(np.median(e_b[inliers])), 1e-9)
+        s_d = max(1.4826 * float(np.median(e_d[used])), 1e-9)
+        keep = used & (e_d <= 3.0 * s_d)
+        w_d = 1.0 / (s_d * z[keep] ** 2)
+        A = np.concatenate([(J_b[inliers] / s_b).reshape(-1, 6),
+                            (J_d[keep] * w_d[:, None, None]).reshape(-1, 6)])
+        b = np.concatenate([(r_b[inliers] / s_b).ravel(), (r_d[keep] * w_d[:, None]).ravel()])
+        delta = -np.linalg.lstsq(A, b, rcond=None)[0]
+        R, p = R @ so3_exp(delta[:3]), p + delta[3:]
+    return R, p
+
+
 def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: np.ndarray,
                       b1: np.ndarray, S_list: list[np.ndarray], p_HP: np.ndarray, min_points: int = 10,
-                      iterations: int = 4):  # fmt: skip
+                      iterations: int = 4, q1: np.ndarray | None = None):  # fmt: skip
     """The camera after a move (beyond the paper) from two things that the move left as they were:
     the static scene (its rotation) and the held tool (its position).
 
@@ -481,25 +528,37 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
       (directions), so given the camera's shift ``p_C0C1`` the turn is an orthogonal Procrustes
       problem on directions. Far anchors pin it to their pixel noise over the focal length, whatever
       the shift; the shift itself (the parallax) they hardly show.
+    - The scene's depth after the move too (``q1``, in C1, NaN rows without): a static point
+      satisfies ``q0 = R_C0C1 q1 + p_C0C1``, so the shift is the median of ``q0 - R_C0C1 q1`` over
+      the fitted anchors with depth on both sides (at least ``min_points``; the depth noise of
+      each, averaged over the views' frames, and over the anchors). None or empty: no depth after.
     - The tool: points with known ``p_HP`` (K x 3, learned under the camera before) and their
       samples after the move (``S_list``, raw statistics) give ``p_WC`` for a known ``R_WC``
       (``position_given_rotation``).
 
-    Alternates the two from ``p_C0C1 = 0`` (``iterations`` times; the coupling is the shift over
-    the anchors' depths, small). Anchors whose direction misfits by more than three times the median
-    are left out (a feature of the moving arm, a track that jumped), each fit. Without tool samples
-    (``S_list`` empty) the position is left at ``p_WC0`` (the turn alone, e.g. to find the tool's
-    points again). Returns ``(R_WC, p_WC, rms_angle, num_anchors)`` (the anchors' RMS misfit, rad),
-    or None with fewer than ``min_points`` anchors left."""
+    Alternates the rotation and the shift (``iterations`` times; the coupling is the shift over
+    the anchors' depths, small), from the scene's shift if it has one, else from ``p_C0C1 = 0``;
+    the shift is the tool's when there are tool samples, else the scene's, else none (the
+    position left at ``p_WC0``: the turn alone, e.g. to find the tool's points again). Anchors
+    whose direction misfits by more than three times the median are left out (a feature of the
+    moving arm, a track that jumped), each fit. Returns a ``CameraAfterTurn``, or None with fewer
+    than ``min_points`` anchors left."""
     b0, b1 = np.asarray(b0, float).reshape(-1, 3), np.asarray(b1, float).reshape(-1, 3)
     q0 = np.asarray(q0, float).reshape(-1, 3)
+    q1 = np.full_like(q0, np.nan) if q1 is None or np.size(q1) == 0 else np.asarray(q1, float).reshape(-1, 3)
+    if not (b1.shape == q0.shape == q1.shape == b0.shape):
+        raise ValueError(f"camera_after_turn: b0, q0, b1 and q1 must be K x 3 alike, got {b0.shape}, "
+                         f"{q0.shape}, {b1.shape}, {q1.shape}")
     far = ~np.all(np.isfinite(q0), axis=1)
+    deep = ~far & np.all(np.isfinite(q1), axis=1)  # depth on both sides
     R_WC0, p_WC0 = np.asarray(R_WC0, float), np.asarray(p_WC0, float)
     P, n = _known_points_statistic(S_list, p_HP)
     if b0.shape[0] < min_points:
         return None
-    p_C0C1, inliers = np.zeros(3), np.ones(b0.shape[0], bool)
-    for _ in range(iterations if n > 0 else 1):
+    # Without tool samples, the scene's depth gives the shift (when enough anchors have it).
+    scene = n == 0 and np.count_nonzero(deep) >= min_points
+    p_C0C1, inliers, from_scene = np.zeros(3), np.ones(b0.shape[0], bool), False
+    for _ in range(iterations if n > 0 or scene else 1):
         c = np.where(far[:, None], b0, q0 - p_C0C1)
         c /= np.linalg.norm(c, axis=1, keepdims=True)
         for _ in range(2):  # fit, leave out the misfits, fit again
@@ -509,7 +568,14 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
             if np.count_nonzero(inliers) < min_points:
                 return None
         R_WC = R_WC0 @ R_C0C1
-        p_WC = _position_given_rotation(P, n, R_WC) if n > 0 else p_WC0.copy()
-        p_C0C1 = R_WC0.T @ (p_WC - p_WC0)
+        used = inliers & deep
+        if n > 0:
+            p_WC = _position_given_rotation(P, n, R_WC)
+            p_C0C1 = R_WC0.T @ (p_WC - p_WC0)
+            continue
+        if scene and np.count_nonzero(used) >= min_points:
+            R_C0C1, p_C0C1 = _scene_registration(R_C0C1, p_C0C1, b0, q0, b1, q1, far, inliers, used)
+            R_WC, from_scene = R_WC0 @ R_C0C1, True
+        p_WC = p_WC0 + R_WC0 @ p_C0C1
     rms = math.sqrt(float(np.mean(angle[inliers] ** 2)))
-    return R_WC, p_WC, rms, int(np.count_nonzero(inliers))
+    return CameraAfterTurn(R_WC, p_WC, rms, int(np.count_nonzero(inliers)), from_scene)

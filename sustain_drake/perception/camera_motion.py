@@ -64,9 +64,11 @@ the *view before* (if it has ``turn_frames`` frames: the scene was at rest befor
 new view starts once the scene rests again. When a declared move's view after has ``turn_frames``
 frames, the anchors seen in both views (each in at least half of either's frames) give the turn's
 correspondences: per anchor its bearing before and after (unit vectors in C0 and C1) and its point
-before (in C0, NaN without depth). The camera's rotation and translation are estimated from them
-downstream (``identification.eye_to_hand.camera_after_turn``, with the tool points for the
-translation): a far scene pins the rotation to a few hundredths of a degree, but not the position.
+before and after (in C0 and C1, NaN without depth). The camera's rotation and translation are
+estimated from them downstream (``identification.eye_to_hand.camera_after_turn``, with the tool
+points for the translation): a far scene pins the rotation to a few hundredths of a degree; its
+bearings hardly show the position, its depth on both sides does (to the depth noise over the
+anchors), enough to match the tool's points again.
 The anchors' tracks through the move are used as they are (re-registering the view before against
 the image after moved them by 0.07 px median in ``diagrams/hand_eye.yaml``'s head turn).
 """
@@ -153,9 +155,10 @@ class SceneTurn:
     """The correspondences of the static scene across camera move number ``move`` (0: none yet),
     formed at ``time`` (s) from the move's episode starting at ``start`` (s): per anchor seen at rest
     before and after the move, its unit bearing before ``b0`` (K x 3, in the camera frame C0 before),
-    its point before ``q0`` (K x 3, m, in C0; NaN rows without depth) and its unit bearing after
-    ``b1`` (K x 3, in the camera frame C1 after). A point of the static scene satisfies
-    ``q0 = R_C0C1 q1 + p_C0C1`` (``q1`` along ``b1``)."""
+    its point before ``q0`` (K x 3, m, in C0; NaN rows without depth), its unit bearing after
+    ``b1`` (K x 3, in the camera frame C1 after) and its point after ``q1`` (K x 3, m, in C1; NaN
+    rows without depth). A point of the static scene satisfies ``q0 = R_C0C1 q1 + p_C0C1`` (``q1``
+    along ``b1``)."""
 
     move: int = 0
     time: float = -math.inf
@@ -163,6 +166,7 @@ class SceneTurn:
     b0: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     q0: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     b1: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    q1: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def __len__(self) -> int:
         return int(self.b0.shape[0])
@@ -301,7 +305,7 @@ def scene_turn(before: SceneView, after: SceneView, intrinsics: PinholeIntrinsic
             & (2 * after.seen[i1] >= min(after.frames, VIEW_FRAMES)))
     i0, i1 = i0[keep], i1[keep]
     return SceneTurn(move, float(time), float(start), bearings(before.px[i0], intrinsics),
-                     before.p_CP[i0].copy(), bearings(after.px[i1], intrinsics))
+                     before.p_CP[i0].copy(), bearings(after.px[i1], intrinsics), after.p_CP[i1].copy())
 
 
 def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionParams,
