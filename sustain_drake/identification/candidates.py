@@ -234,7 +234,7 @@ class CandidateParams:
             a change, where the kept camera and the scene's turn re-find the model from the far
             postures they were built with (asked after changes too, the eight runs of
             ``hand_eye.yaml`` gave the same misses: the head move not re-found within 15 s on seeds
-            1 and 5).
+            1 and 5, before ``turn_scene_shift``).
     """
 
     max_candidates: int = 8

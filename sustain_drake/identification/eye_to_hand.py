@@ -489,6 +489,8 @@ def _scene_registration(R, p, b0, q0, b1, q1, far, inliers, used, steps: int = 3
     residual is weighted by its robust scale (1.48 MAD; the depth's scaled by ``z^2``), and depth
     misfits over three scales are left out (an anchor on a moving thing, a depth edge)."""
     z = np.maximum(np.linalg.norm(q1, axis=1), 0.1)
+    b1_x = np.array([skew(v) for v in b1])  # the Jacobians' cross-product matrices, fixed
+    q1_x = np.array([skew(v) for v in np.nan_to_num(q1)])
     for _ in range(steps):
         c = np.where(far[:, None], b0, q0 - p)
         norm = np.linalg.norm(c, axis=1, keepdims=True)
@@ -496,11 +498,11 @@ def _scene_registration(R, p, b0, q0, b1, q1, far, inliers, used, steps: int = 3
         r_b = c - b1 @ R.T  # bearing misfit (rad)
         r_d = q0 - q1 @ R.T - p  # depth misfit (m)
         J_b = np.zeros((len(c), 3, 6))
-        J_b[:, :, :3] = np.einsum("ij,njk->nik", R, np.array([skew(v) for v in b1]))
+        J_b[:, :, :3] = np.einsum("ij,njk->nik", R, b1_x)
         near = ~far
         J_b[near, :, 3:] = -(np.eye(3) - c[near, :, None] * c[near, None, :]) / norm[near, :, None]
         J_d = np.zeros((len(c), 3, 6))
-        J_d[:, :, :3] = np.einsum("ij,njk->nik", R, np.array([skew(v) for v in np.nan_to_num(q1)]))
+        J_d[:, :, :3] = np.einsum("ij,njk->nik", R, q1_x)
         J_d[:, :, 3:] = -np.eye(3)
         e_b = np.linalg.norm(r_b, axis=1)
         e_d = np.linalg.norm(np.nan_to_num(r_d), axis=1) / z**2
@@ -529,17 +531,17 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
       problem on directions. Far anchors pin it to their pixel noise over the focal length, whatever
       the shift; the shift itself (the parallax) they hardly show.
     - The scene's depth after the move too (``q1``, in C1, NaN rows without): a static point
-      satisfies ``q0 = R_C0C1 q1 + p_C0C1``, so the shift is the median of ``q0 - R_C0C1 q1`` over
-      the fitted anchors with depth on both sides (at least ``min_points``; the depth noise of
-      each, averaged over the views' frames, and over the anchors). None or empty: no depth after.
+      satisfies ``q0 = R_C0C1 q1 + p_C0C1``, so with at least ``min_points`` fitted anchors that
+      have depth on both sides the turn and the shift are fitted to the bearings and the depth
+      together (``_scene_registration``). None or empty: no depth after.
     - The tool: points with known ``p_HP`` (K x 3, learned under the camera before) and their
       samples after the move (``S_list``, raw statistics) give ``p_WC`` for a known ``R_WC``
       (``position_given_rotation``).
 
-    Alternates the rotation and the shift (``iterations`` times; the coupling is the shift over
-    the anchors' depths, small), from the scene's shift if it has one, else from ``p_C0C1 = 0``;
-    the shift is the tool's when there are tool samples, else the scene's, else none (the
-    position left at ``p_WC0``: the turn alone, e.g. to find the tool's points again). Anchors
+    Alternates the rotation and the shift from ``p_C0C1 = 0`` (``iterations`` times; the coupling
+    is the shift over the anchors' depths, small); the shift is the tool's when there are tool
+    samples, else the scene's, else none (the position left at ``p_WC0``: the turn alone, e.g. to
+    find the tool's points again). Anchors
     whose direction misfits by more than three times the median are left out (a feature of the
     moving arm, a track that jumped), each fit. Returns a ``CameraAfterTurn``, or None with fewer
     than ``min_points`` anchors left."""
