@@ -201,6 +201,12 @@ class CandidateParams:
             the camera at that position, the common offset searched within this of it (not
             ``turn_max_shift`` of the old one: an offset as long as the marks' spacing maps tracks
             of unknown marks onto their known neighbours) and one new track suffices.
+        turn_admit_known: with the turn, also admit (before body features) tracks whose point lies
+            within the window of the camera's position (``turn_scene_shift`` or ``turn_max_shift``)
+            plus ``turn_radius`` of where the turned camera sees a known point
+            (``_near_known_points``), body or not: after the move the detector's body cells hold
+            the static scene (False: body features only; seed 5's head move was re-found 15.3 s
+            after its detection, 10.7 s of it without a candidate).
         min_point_spread: m, how far the known points' samples must lie from a line in the camera
             frame (their RMS distance from their principal line, ``keep_tool_points``): an error e
             of a kept ``p_HP`` (learned under the previous camera) turns the new camera by about e
@@ -273,6 +279,7 @@ class CandidateParams:
     turn_max_shift: float = 0.03
     turn_min_samples: int = 15
     turn_scene_shift: float = 0.01
+    turn_admit_known: bool = False
     min_view_change: float = 0.0
     min_rotation_lever: float = 0.0
     motion_min_samples: int = 0
@@ -597,7 +604,9 @@ def step(
         # Confirmed body features first, then features in body cells; oldest track first. While
         # observing (with observers), alternately the nearest to where the adopted model puts the
         # tool point (the tool's points) and the oldest (long tracks: often the hand's own).
-        order = np.lexsort((ids, ~on_body, ~np.isin(ids, [i for i, _ in bank.known_points])))
+        near_known = (_near_known_points(bank, params, X_frame, p_CP, usable)
+                      if params.turn_admit_known and leader < 0 else np.zeros_like(on_body))
+        order = np.lexsort((ids, ~on_body, ~near_known, ~np.isin(ids, [i for i, _ in bank.known_points])))
         if observing:
             tool_point = predicted_p_CP(np.asarray(reference_x), X_frame)
             nearest = np.argsort(np.linalg.norm(p_CP - tool_point, axis=1))
@@ -606,7 +615,8 @@ def step(
             if len(kept) >= params.max_candidates:
                 break
             i = int(ids[k])
-            if (on_body[k] or in_body_cell[k]) and usable[k] and i not in present and i not in rejected:
+            if ((on_body[k] or in_body_cell[k] or near_known[k]) and usable[k] and i not in present
+                    and i not in rejected):
                 kept.append(_admit(i, criteria, frame_time, p_CP[k], X_frame))
                 present.add(i)
                 fed = True
@@ -983,7 +993,7 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     x0, turn, R_turned = bank.moved_from_x, bank.turn, bank.turned_R_WC
     R_WC0, p_WC0 = x0[0:9].reshape(3, 3, order="F"), x0[9:12]
     shifted = bank.turned_p_WC is not None
-    p_turned = bank.turned_p_WC if shifted else p_WC0
+    p_turned, window = _turn_window(bank, params)
     known_p = np.array(list(known.values()))
     ready = [c for c in kept if c.solution.num_samples >= params.turn_min_samples]
     pairs = [(c, known[c.feature_id]) for c in ready if c.feature_id in known]
@@ -994,7 +1004,6 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
            and rotation_spread(c.statistic) >= params.min_rotation_spread]  # else a point of any link fits
     guesses = np.array([best_p_HP_given_camera(c.statistic, R_turned, p_turned) for c in new]).reshape(-1, 3)
     tracked = [best_p_HP_given_camera(c.statistic, R_turned, p_turned) - p for c, p in pairs]
-    window = params.turn_scene_shift if shifted else params.turn_max_shift
     offset = _common_offset(guesses, known_p, tracked, params, window, 1 if shifted else 2)
     if offset is not None:
         for c, guess in zip(new, guesses, strict=True):
@@ -1010,6 +1019,35 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     if fit is None:
         return None
     return _leading(fit[1], fit[2], fit[0], known_p[0])
+
+
+def _turn_window(bank: CandidateBank, params: CandidateParams) -> tuple[np.ndarray, float]:
+    """Where the turned camera is taken to be and how far off that may be (m): at the shift the
+    scene's depth gave, within ``turn_scene_shift``, else at the old position, within
+    ``turn_max_shift``."""
+    if bank.turned_p_WC is not None:
+        return bank.turned_p_WC, params.turn_scene_shift
+    return bank.moved_from_x[9:12], params.turn_max_shift
+
+
+def _near_known_points(bank: CandidateBank, params: CandidateParams, X_WH: np.ndarray, p_CP: np.ndarray,
+                       usable: np.ndarray) -> np.ndarray:
+    """``turn_admit_known``: per tracked feature, whether its point lies within the turned camera's
+    window plus ``turn_radius`` of where that camera, posed as ``_turn_window`` says, sees a known
+    point of the hand at ``X_WH`` (all False before a turn). The detector's body cells are fixed in
+    the image, so after a camera move they hold the static scene and its trials must find the
+    body's features again (seed 5: 10.7 s without a candidate while tracks lay 5-6 mm from where
+    the known marks were predicted); the model says where they are. A point of the static scene
+    admitted so is not lost on the fit: with the hand turning, its samples fit no point of H."""
+    near = np.zeros(len(usable), bool)
+    if bank.turned_R_WC is None or not bank.known_points or not np.any(usable):
+        return near
+    p_WC, window = _turn_window(bank, params)
+    p_HP = np.array([p for _, p in bank.known_points])
+    p_CQ = (p_HP @ X_WH[:3, :3].T + X_WH[:3, 3] - p_WC) @ bank.turned_R_WC  # known points in the turned C
+    distance = np.linalg.norm(p_CP[usable][:, None, :] - p_CQ[None, :, :], axis=2).min(axis=1)
+    near[usable] = distance <= window + params.turn_radius
+    return near
 
 
 def _common_offset(guesses: np.ndarray, known_p: np.ndarray, tracked: list, params: CandidateParams,
