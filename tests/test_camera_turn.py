@@ -277,11 +277,13 @@ def test_the_scene_depth_places_the_turned_camera_so_that_a_mark_is_not_taken_fo
     assert adoption.kind == "scene turn, tool points kept" and k - 400 < 30
     assert adoption.feature_id == 109 and np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 1e-3
     assert rotation_error_deg(adoption.estimate.R_WC, X1[:3, :3]) < 0.02
+    # Without the depth (an RGB-only scene) the offset is the one most new tracks agree on, and the
+    # alias wins (it put the camera 17.7 mm off): matched points on a line are refused, and the full
+    # identification re-finds the camera later.
     bank, k_old = run_head_turn(
         params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0), depth_after=False), new_points=new_points)
-    right = (k_old is not None and bank.adoptions[-1].kind == "scene turn, tool points kept"
-             and np.linalg.norm(bank.adoptions[-1].estimate.p_WC - X1[:3, 3]) < 1e-3)
-    assert not (right and k_old - 400 < 30)
+    assert all(a.kind != "scene turn, tool points kept" for a in bank.adoptions)
+    assert k_old is not None and np.linalg.norm(bank.adoptions[-1].estimate.p_WC - X1[:3, 3]) < 2e-3
 
 
 def test_marks_whose_tracks_ended_before_the_turn_are_found_again():
@@ -297,6 +299,12 @@ def test_marks_whose_tracks_ended_before_the_turn_are_found_again():
     assert adoption.kind == "scene turn, tool points kept" and k - 400 < 30
     assert np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 1e-3
     assert rotation_error_deg(adoption.estimate.R_WC, X1[:3, :3]) < 0.02
+    # Without the scene's depth, three new tracks off a line (no offset aliases them) still do.
+    bank, k = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0), depth_after=False),
+                            new_points={102: ended[2], 103: ended[3], 109: P_TOOL}, ended=ended)
+    adoption = bank.adoptions[-1]
+    assert adoption.kind == "scene turn, tool points kept" and k - 400 < 30
+    assert np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 1e-3
 
 
 def test_after_a_head_turn_tracks_where_the_turned_camera_sees_known_points_are_admitted():

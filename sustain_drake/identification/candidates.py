@@ -56,6 +56,7 @@ from sustain_drake.identification.eye_to_hand import (
     pack_x,
     refine_joint,
     rotation_levers,
+    spread_off_line,
 )
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.identification.sustainable_identifier import (
@@ -194,8 +195,11 @@ class CandidateParams:
             m) gives every track alike, within ``turn_radius`` (m; the only mark within twice that,
             known points within ``turn_radius`` of each other being tracks of one mark: the rod's
             marks lie 15-20 mm apart). The offset is the tracked-through points' own, or
-            the one that most new tracks (at least two) agree on (``_common_offset``). The points
-            must fit the camera within ``observe_consistency`` of the adopted RMS error, as above.
+            the one that most new tracks (at least two) agree on (``_common_offset``); matched so,
+            their known points must lie more than ``turn_radius`` (RMS) off a line, as along a row
+            of marks an offset of one spacing maps tracks of marks never known onto known ones. The
+            points must fit the camera within ``observe_consistency`` of the adopted RMS error, as
+            above.
         turn_scene_shift: m; when the scene's depth on both sides of the move gives the camera's
             shift too (``camera_after_turn`` without tool samples), new tracks are matched under
             the camera at that position, the common offset searched within this of it (not
@@ -1018,6 +1022,12 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
         np.array([p for _, p in ps])), params.observe_consistency**2 * bank.adopted_mse)  # fmt: skip
     if fit is None:
         return None
+    if not shifted and not tracked and _on_a_line([p for _, p in fit[1]], params.turn_radius):
+        # Matched by the offset most new tracks agree on, with the shift unknown: along a row of
+        # marks (the rod's) an offset of one spacing maps tracks of marks never known onto their
+        # known neighbours and the camera follows it (17.7 mm in the tests); points off the line
+        # leave no such offset.
+        return None
     return _leading(fit[1], fit[2], fit[0], known_p[0])
 
 
@@ -1048,6 +1058,11 @@ def _near_known_points(bank: CandidateBank, params: CandidateParams, X_WH: np.nd
     distance = np.linalg.norm(p_CP[usable][:, None, :] - p_CQ[None, :, :], axis=2).min(axis=1)
     near[usable] = distance <= window + params.turn_radius
     return near
+
+
+def _on_a_line(points: list, tolerance: float) -> bool:
+    """Whether the points lie within ``tolerance`` (RMS, m) of one line (one or two always do)."""
+    return len(points) < 3 or spread_off_line(np.cov(np.array(points).T, bias=True)) <= tolerance
 
 
 def _common_offset(guesses: np.ndarray, known_p: np.ndarray, tracked: list, params: CandidateParams,

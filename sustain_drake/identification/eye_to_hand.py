@@ -464,9 +464,14 @@ def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):
     R = nearest_rotation(-g.reshape(3, 3, order="F"))  # max tr(-G^T R) on SO(3)
     p_WC = _position_given_rotation(P, n, R)
     scatter = P[0:9:3, 0:9:3] - np.outer(P[0:9:3, 9], P[0:9:3, 9]) / n  # n C: P_RR = (sum a a^T) x I
-    smallest = np.linalg.eigvalsh(scatter / n)[:2]  # the scatter off the principal line
-    spread = math.sqrt(max(float(smallest.sum()), 0.0))
-    return R, p_WC, spread
+    return R, p_WC, spread_off_line(scatter / n)
+
+
+def spread_off_line(covariance: np.ndarray) -> float:
+    """The RMS distance (m) of points from their principal line, from their 3 x 3 covariance:
+    the root of its two smallest eigenvalues' sum (0 for points on a line)."""
+    smallest = np.linalg.eigvalsh(covariance)[:2]
+    return math.sqrt(max(float(smallest.sum()), 0.0))
 
 
 class CameraAfterTurn(NamedTuple):
