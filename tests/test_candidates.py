@@ -767,26 +767,52 @@ def test_a_held_view_is_one_sample_with_min_view_change():
     assert errors[0.002] < errors[0.0] / 3
 
 
+def narrow_then_rich_pose(k):
+    """The hand turning within 0.05 rad and moving within 2 cm for 10 s, then moving richly."""
+    if k >= 300:
+        return hand_pose(k)
+    X = hand_pose(k)
+    X[:3, :3] = Rotation.from_rotvec(0.1 * Rotation.from_matrix(X[:3, :3]).as_rotvec()).as_matrix()
+    X[:3, 3] = hand_pose(0)[:3, 3] + 0.2 * (X[:3, 3] - hand_pose(0)[:3, 3])
+    return X
+
+
+def two_tool_points(k, X, rng):
+    """Two points of the tool, tracked for 20 s."""
+    if k >= 600:
+        return None
+    p_CP = [seen(X, P_TOOL, rng, noise=1e-5), seen(X, P_TOOL + [0.0, 0.02, 0.05], rng, noise=1e-5)]
+    return [4, 5], p_CP, [True, True], [True, True]
+
+
+def test_a_camera_waits_until_the_hand_turned_enough():
+    """``min_adopt_rotation_spread``: a converged leader waits, asking for more motion, until the
+    hand turned that much over its samples; without it the camera is adopted while the hand has
+    barely turned, further off."""
+    free, _ = run(two_tool_points, params=replace(PARAMS, joint=True), pose=narrow_then_rich_pose)
+    early = free.adoptions[0]
+    assert early.time < 300 * DT and candidates.rotation_spread(early.statistic) < 0.1
+    params = replace(PARAMS, joint=True, min_adopt_rotation_spread=0.1)
+    bank, k = run(lambda j, X, rng: two_tool_points(j, X, rng) if j < 290 else None, params=params,
+                  pose=narrow_then_rich_pose)
+    assert bank.leader < 0 and bank.more_motion and bank.held_back in (4, 5)
+    bank, _ = run(two_tool_points, bank=bank, start=k, params=params, pose=narrow_then_rich_pose)
+    late = bank.adoptions[0]
+    assert late.time > 300 * DT and candidates.rotation_spread(late.statistic) >= 0.1 and not bank.more_motion
+
+    def error(adoption):
+        return np.linalg.norm(adoption.estimate.p_WC - TRUTH.X_WC[:3, 3])
+
+    assert error(late) < error(early) / 2
+
+
 def test_a_camera_the_views_do_not_pin_waits_for_more_motion(monkeypatch):
     """``min_rotation_lever``: the leader's camera is adopted only once its points' views pin the
     camera's rotation (``smallest_rotation_lever``); until then no leader and ``more_motion``. The
     hand turns within 0.05 rad and moves within 2 cm for 10 s, then moves richly. Held back
     and then its point not seen (its track ended, or no refined point), the leader is adopted as it
     is."""
-    def pose(k):
-        if k >= 300:
-            return hand_pose(k)
-        X = hand_pose(k)
-        X[:3, :3] = Rotation.from_rotvec(0.1 * Rotation.from_matrix(X[:3, :3]).as_rotvec()).as_matrix()
-        X[:3, 3] = hand_pose(0)[:3, 3] + 0.2 * (X[:3, 3] - hand_pose(0)[:3, 3])
-        return X
-
-    def frames(k, X, rng):
-        if k >= 600:
-            return None
-        p_CP = [seen(X, P_TOOL, rng, noise=1e-5), seen(X, P_TOOL + [0.0, 0.02, 0.05], rng, noise=1e-5)]
-        return [4, 5], p_CP, [True, True], [True, True]
-
+    pose, frames = narrow_then_rich_pose, two_tool_points
     free, _ = run(frames, params=replace(PARAMS, joint=True), pose=pose)
     early = free.adoptions[0]
     assert early.time < 300 * DT and early.rotation_lever < 0.01

@@ -237,6 +237,12 @@ class CandidateParams:
             Otherwise it waits for more of the motion (``CandidateBank.more_motion``) as long as its
             point is seen: once its track ends or it has had no refined point for 0.3 s, it is
             adopted with the lever it has.
+        min_adopt_rotation_spread: rad; > 0: the same wait (held back, more motion asked for, adopted
+            as it is once its point is not seen) until the hand turned at least this much over the
+            leader's samples (``rotation_spread``): the camera's rotation is seen only through the
+            hand's turning, and its error goes as the inverse of the turn (0: no such test). On
+            eleven runs of ``hand_eye.yaml`` the hand had turned 0.095-0.122 rad at the first
+            adoption, except seed 10's 0.068 rad, whose camera was the worst (0.097 deg, 2.04 mm).
         motion_min_samples: > 0: until the first identification, more motion is asked for
             (``CandidateBank.more_motion``) once a candidate has this many samples: the detector's
             confirming trials, which hold the arm near one posture, have found a point to identify,
@@ -286,6 +292,7 @@ class CandidateParams:
     turn_admit_known: bool = False
     min_view_change: float = 0.0
     min_rotation_lever: float = 0.0
+    min_adopt_rotation_spread: float = 0.0
     motion_min_samples: int = 0
 
     def __post_init__(self):
@@ -304,7 +311,8 @@ class CandidateParams:
             raise ValueError(f"observe_radius must be positive, got {self.observe_radius}")
         if not (self.stitch_radius >= 0 and math.isfinite(self.stitch_radius)):
             raise ValueError(f"stitch_radius must be >= 0, got {self.stitch_radius}")
-        for name in ("refine_interval", "free_space_radius", "min_view_change", "min_rotation_lever"):
+        for name in ("refine_interval", "free_space_radius", "min_view_change", "min_rotation_lever",
+                     "min_adopt_rotation_spread"):
             value = getattr(self, name)
             if not (value >= 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be >= 0, got {value}")
@@ -404,8 +412,8 @@ class CandidateBank:
     turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
     turned_p_WC: np.ndarray | None = None  # and where the scene's depth puts it (None: not known)
     reset_time: float = -math.inf  # s, when the last reset came
-    more_motion: bool = False  # a leader was held back (``min_rotation_lever``), none leads, one converged
-    held_back: int = -1  # the feature id of the candidate held back (``min_rotation_lever``), -1: none
+    more_motion: bool = False  # a leader was held back (lever or spread), none leads, one converged
+    held_back: int = -1  # the feature id of the candidate held back (as above), -1: none
 
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
@@ -659,8 +667,11 @@ def step(
                     if len(statistics) > 1:
                         kind = f"identified, camera refined with {len(statistics)} points"
                 lever = smallest_rotation_lever(statistics, best.solution.estimate)
-                # min_rotation_lever: the points' views must pin the camera's rotation too.
-                held_back = lever < params.min_rotation_lever and not unseen
+                # min_rotation_lever, min_adopt_rotation_spread: the points' views must pin the
+                # camera's rotation too.
+                spread = rotation_spread(best.statistic)
+                held_back = (lever < params.min_rotation_lever
+                             or spread < params.min_adopt_rotation_spread) and not unseen
                 if not held_back:
                     kept = [best if c.feature_id == best.feature_id else c for c in kept]
                     leader = best.feature_id
@@ -708,8 +719,9 @@ def step(
     # checks a solution's samples against the count since a reset); after, observations count.
     count = bank.sample_count + (1 if fed and bank.leader < 0 else 0)
     new_leader = leader != bank.leader
-    # Once a leader was held back for min_rotation_lever, more motion is wanted until one leads or
-    # no converged candidate is left (then the detector's trials must find new body features).
+    # Once a leader was held back (min_rotation_lever, min_adopt_rotation_spread), more motion is wanted
+    # until one leads or no converged candidate is left (then the detector's trials must find new body
+    # features).
     first_point = params.motion_min_samples > 0 and not adoptions and any(
         c.solution.num_samples >= params.motion_min_samples for c in kept)
     more_motion = leader < 0 and (held_back or first_point or (bank.more_motion and any(
