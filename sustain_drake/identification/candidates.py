@@ -1060,7 +1060,8 @@ def _near_known_points(bank: CandidateBank, params: CandidateParams, X_WH: np.nd
     the image, so after a camera move they hold the static scene and its trials must find the
     body's features again (seed 5: 10.7 s without a candidate while tracks lay 5-6 mm from where
     the known marks were predicted); the model says where they are. A point of the static scene
-    admitted so is not lost on the fit: with the hand turning, its samples fit no point of H."""
+    admitted so is left out by the camera's fit: with the hand turning, its samples fit no point
+    of H."""
     near = np.zeros(len(usable), bool)
     if bank.turned_R_WC is None or not bank.known_points or not np.any(usable):
         return near
