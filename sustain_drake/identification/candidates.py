@@ -240,10 +240,10 @@ class CandidateParams:
         min_adopt_rotation_spread: rad; > 0: the same wait (held back, more motion asked for, adopted
             as it is once its point is not seen) until the hand turned at least this much over the
             leader's samples (``rotation_spread``): the camera's rotation is seen only through the
-            hand's turning (0: no such test). On eleven runs of ``hand_eye.yaml`` the hand had
-            turned 0.095-0.122 rad at the first adoption, except seed 10's 0.068 rad, whose camera
-            was the worst (0.097 deg, 2.04 mm); 0.09 put it at 0.72 mm, but held seed 16 (0.081 rad,
-            0.45 mm without the wait) 7.9 s longer, so it is off there (README).
+            hand's turning (0: no such test). On ten runs of ``hand_eye.yaml`` the hand had turned
+            0.095-0.122 rad at the first adoption, on seed 10 0.068 rad, whose camera was the worst
+            (0.097 deg, 2.04 mm); 0.09 put it at 0.72 mm, but held seed 16 (0.081 rad, 0.45 mm
+            without the wait) 7.9 s longer, so it is off there (README).
         motion_min_samples: > 0: until the first identification, more motion is asked for
             (``CandidateBank.more_motion``) once a candidate has this many samples: the detector's
             confirming trials, which hold the arm near one posture, have found a point to identify,
