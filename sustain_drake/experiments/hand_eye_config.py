@@ -65,9 +65,9 @@ class HandEyeConfig:
     identifying again, the far posture also comes when the arm has stayed within 0.2 rad of one
     posture that long, however often the detector asks. ``identifying_motion_reach``: rad; > 0: the
     postures asked for while the candidates ask for more motion (``candidates.motion_min_samples``,
-    ``min_rotation_lever``) lie within this (max-norm) of the arm's posture when the ask began and
-    come after one interval near a posture (0: the far postures of the whole ranges, after
-    ``identifying_motion_max_hold``).
+    ``min_rotation_lever``, ``min_adopt_rotation_spread``) lie within this (max-norm) of the arm's
+    posture when the ask began and come after one interval near a posture (0: the far postures of
+    the whole ranges, after ``identifying_motion_max_hold``).
     ``refine_points``: feed the candidates the refined points (``FeatureRefiner``: sub-pixel corner
     and robust depth, ``refinement``) instead of the tracker's. ``false_alarm_window``: s, a
     detection with no disturbance in that long before it is a false alarm (evaluation only).

@@ -474,8 +474,12 @@ def x_is_set(x: np.ndarray | None) -> bool:
 
 def predicted_p_CP(x: np.ndarray, X_WH: np.ndarray) -> np.ndarray:
     """Where estimate ``x`` (Eq. (36)) puts the tracked point in the camera frame (Eq. (30))."""
-    R_WC = x[0:9].reshape(3, 3, order="F")
-    return R_WC.T @ (X_WH[:3, :3] @ x[12:15] + X_WH[:3, 3] - x[9:12])
+    return points_in_camera(x[0:9].reshape(3, 3, order="F"), x[9:12], x[12:15], X_WH)
+
+
+def points_in_camera(R_WC: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray, X_WH: np.ndarray) -> np.ndarray:
+    """Eq. (30): points of the hand (``p_HP``, 3 or K x 3) in the camera frame, the hand at ``X_WH``."""
+    return (p_HP @ X_WH[:3, :3].T + X_WH[:3, 3] - p_WC) @ R_WC
 
 
 def step(
@@ -1067,8 +1071,7 @@ def _near_known_points(bank: CandidateBank, params: CandidateParams, X_WH: np.nd
     if bank.turned_R_WC is None or not bank.known_points or not np.any(usable):
         return near
     p_WC, window = _turn_window(bank, params)
-    p_HP = np.array([p for _, p in bank.known_points])
-    p_CQ = (p_HP @ X_WH[:3, :3].T + X_WH[:3, 3] - p_WC) @ bank.turned_R_WC  # known points in the turned C
+    p_CQ = points_in_camera(bank.turned_R_WC, p_WC, np.array([p for _, p in bank.known_points]), X_WH)
     distance = np.linalg.norm(p_CP[usable][:, None, :] - p_CQ[None, :, :], axis=2).min(axis=1)
     near[usable] = distance <= window + params.turn_radius
     return near
@@ -1259,7 +1262,7 @@ def _observe_points(bank, params, time, X_WH, ids, p_CP, usable, body, row, refe
     hand = [e for e, on_tool in errors if not on_tool]
     reported = max(_lower_median(tool), _lower_median(hand) if len(hand) >= 2 or not tool else -math.inf)
     return replace(bank, sample_count=before + 1, sample_error=reported,
-                   tool_observed=any(tool for _, tool in errors))
+                   tool_observed=bool(tool))
 
 
 def _blind_evidence(bank, params, row, usable, x, allowable_error: float, before: int) -> CandidateBank:
