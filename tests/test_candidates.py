@@ -342,6 +342,11 @@ def test_params_validation():
         CandidateParams(max_candidates=0)
     with pytest.raises(ValueError, match="reacquire_radius"):
         CandidateParams(reacquire_radius=float("nan"))
+    for bad in (-0.01, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="min_adopt_rotation_spread must be >= 0"):
+            CandidateParams(min_adopt_rotation_spread=bad)
+    with pytest.raises(ValueError, match="turn_scene_shift must be a positive number"):
+        CandidateParams(turn_scene_shift=0.0)
 
 
 @pytest.mark.parametrize("stitch_radius", [0.0, 0.005])
