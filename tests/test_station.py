@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydrake.common.yaml import yaml_dump_typed
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 
@@ -285,6 +286,18 @@ def test_backdrop_gives_the_static_scene_corners():
     assert plain <= 2 < 20 <= posters
     # The posters are on the wall: the same depth within their 3 cm offset and the depth noise.
     assert 3.5 < posters_depth < 5.0 and abs(posters_depth - plain_depth) < 0.1
+
+
+def test_the_steady_run_is_hand_eye_without_disturbances():
+    """``diagrams/hand_eye_steady.yaml`` (the 10-minute run for false alarms) is
+    ``diagrams/hand_eye.yaml`` for 600 s without the slip and the head move: nothing else differs, so
+    a key changed in one and not the other shows here."""
+    base = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
+    steady = load_scenario(ROOT / "diagrams" / "hand_eye_steady.yaml")
+    assert (steady.duration, steady.disturbances) == (600.0, [])
+    assert len(base.disturbances) == 2
+    steady.duration, steady.disturbances = base.duration, base.disturbances
+    assert yaml_dump_typed(steady) == yaml_dump_typed(base)  # Drake's configs define no ==
 
 
 def test_the_pinned_camera_variant_is_hand_eye_with_its_keys():
