@@ -321,6 +321,8 @@ def test_the_pinned_camera_variant_is_hand_eye_with_its_keys():
     assert (shipped.motion_min_samples, shipped.joint_consistency) == (30, 2.0)
     # And before the admission at known points after a move (session 11): off, as then.
     assert keys.turn_admit_known is False
-    keys.turn_admit_known = True
-    assert shipped.turn_admit_known is True
+    # And before the weighted joint refinement (session 12): off, as then.
+    assert keys.joint_weighted is False
+    keys.turn_admit_known = keys.joint_weighted = True
+    assert shipped.turn_admit_known is True and shipped.joint_weighted is True
     assert repr(variant) == repr(base)
