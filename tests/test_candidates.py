@@ -894,23 +894,26 @@ def test_a_tracked_point_asks_for_more_motion_with_motion_min_samples():
         replace(PARAMS, motion_min_samples=-1)
 
 
+def tracked(feature_id, p_HP, rng, noise=1e-3, drift=0.0):
+    """A candidate of 300 frames of the point p_HP over ``hand_pose``, with noise and a drift
+    along the camera's x that follows the hand's travel (m; a track sliding on its mark)."""
+    identifier = EyeToHandIdentifier()
+    for k in range(300):
+        X = hand_pose(k)
+        p = seen(X, p_HP, rng, noise=noise) + [drift * math.sin(0.5 * k * DT), 0.0, 0.0]
+        identifier.add(p, X[:3, :3], X[:3, 3])
+    return candidates.Candidate(feature_id, identifier.state, identifier.solve(), 0.0, 0.0)
+
+
 def test_joint_consistency_leaves_out_a_point_with_an_error_of_its_own():
     """``joint_consistency``: a point whose measurements carry an error of their own that follows
     the motion (5 mm along the camera's x, varying with the hand's travel: a track sliding on its
     mark) fits the leader's camera at about 2.3 times the leader's RMS error. At 3 it joins the
     joint refinement and turns the camera; at 2 it is left out, and the camera is the good points'."""
-    def track(feature_id, p_HP, rng, drift=0.0):
-        identifier = EyeToHandIdentifier()
-        for k in range(300):
-            X = hand_pose(k)
-            p = seen(X, p_HP, rng, noise=1e-3) + [drift * math.sin(0.5 * k * DT), 0.0, 0.0]
-            identifier.add(p, X[:3, :3], X[:3, 3])
-        return candidates.Candidate(feature_id, identifier.state, identifier.solve(), 0.0, 0.0)
-
     rng = np.random.default_rng(0)
-    leader = track(1, P_TOOL, rng)
-    good = track(2, P_TOOL + [0.03, -0.02, 0.04], rng)
-    stray = track(3, P_TOOL + [0.0, 0.03, 0.02], rng, 0.005)
+    leader = tracked(1, P_TOOL, rng)
+    good = tracked(2, P_TOOL + [0.03, -0.02, 0.04], rng)
+    stray = tracked(3, P_TOOL + [0.0, 0.03, 0.02], rng, drift=0.005)
     R, p_WC = leader.solution.estimate.R_WC, leader.solution.estimate.p_WC
     rms = [math.sqrt(candidates.mean_squared_error_of(c.statistic, pack_x(
         R, p_WC, candidates.best_p_HP_given_camera(c.statistic, R, p_WC)))) for c in (leader, good, stray)]
@@ -932,20 +935,13 @@ def test_joint_weighted_trusts_each_point_by_its_own_error():
     turn the joint camera; weighted by the inverse of each point's own mean squared error it is
     nearly the three good points' camera (over six draws: RMS 0.8 mm -> 0.25 mm; on a single draw
     the equal weights can be the luckier), and the weights are what the noise says (36:1)."""
-    def track(feature_id, p_HP, rng, noise):
-        identifier = EyeToHandIdentifier()
-        for k in range(300):
-            X = hand_pose(k)
-            identifier.add(seen(X, p_HP, rng, noise=noise), X[:3, :3], X[:3, 3])
-        return candidates.Candidate(feature_id, identifier.state, identifier.solve(), 0.0, 0.0)
-
     errors = {False: [], True: []}
     for seed in range(6):
         rng = np.random.default_rng(seed)
-        leader = track(1, P_TOOL, rng, 0.5e-3)
-        others = [track(2, P_TOOL + [0.03, -0.02, 0.04], rng, 0.5e-3),
-                  track(3, P_TOOL + [-0.02, 0.03, 0.05], rng, 0.5e-3),
-                  track(4, P_TOOL + [0.0, 0.03, 0.02], rng, 3e-3)]
+        leader = tracked(1, P_TOOL, rng, noise=0.5e-3)
+        others = [tracked(2, P_TOOL + [0.03, -0.02, 0.04], rng, noise=0.5e-3),
+                  tracked(3, P_TOOL + [-0.02, 0.03, 0.05], rng, noise=0.5e-3),
+                  tracked(4, P_TOOL + [0.0, 0.03, 0.02], rng, noise=3e-3)]
         for weighted in (False, True):
             best, points = candidates._joint_refined(leader, others, [], CandidateParams(
                 joint=True, joint_consistency=10.0, joint_weighted=weighted))
@@ -960,7 +956,7 @@ def test_joint_weighted_trusts_each_point_by_its_own_error():
     assert rms[True] < min(0.4e-3, rms[False] / 2), rms
     # Noise-free points (every error round-off) weigh the same: the floor, not round-off, decides.
     rng = np.random.default_rng(0)
-    exact = [track(k, P_TOOL + [0.01 * k, 0.0, 0.02], rng, 0.0) for k in range(3)]
+    exact = [tracked(k, P_TOOL + [0.01 * k, 0.0, 0.02], rng, noise=0.0) for k in range(3)]
     est = exact[0].solution.estimate
     P = np.array([candidates.best_p_HP_given_camera(c.statistic, est.R_WC, est.p_WC) for c in exact])
     assert np.allclose(candidates._inverse_variance_weights([c.statistic for c in exact], est.R_WC, est.p_WC,
