@@ -812,6 +812,11 @@ def _archived(archive: list, params: CandidateParams) -> list:
     return sorted(useful, key=lambda c: -c.solution.num_samples)[: params.max_archived]
 
 
+# m^2 (1 um RMS): a mean squared error below this is round-off (noise-free data); the joint
+# refinement's ratios (the members' limit, the weights) are taken against at least this.
+_ROUND_OFF_MSE = 1e-12
+
+
 def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tuple[Candidate, list]:
     """``params.joint``: the leader's camera refined jointly with every other candidate (tracked
     or archived, ``joint_min_samples`` samples) that it explains (``eye_to_hand.refine_joint``:
@@ -828,7 +833,7 @@ def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> t
     others = [c for c in list(kept) + list(archive)
               if c.feature_id != best.feature_id and c.solution.num_samples >= params.joint_min_samples]
     R, p_WC = estimate.R_WC, estimate.p_WC
-    limit = params.joint_consistency**2 * max(best.solution.expected_mse, 1e-12)
+    limit = params.joint_consistency**2 * max(best.solution.expected_mse, _ROUND_OFF_MSE)
     members = []
     for _ in range(3 if params.stitch_radius > 0 else 2):
         members = [c for c in others if mean_squared_error_of(
@@ -851,17 +856,12 @@ def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> t
     return replace(best, solution=solution), statistics
 
 
-# A point's mean squared error is floored here (m^2, 1 um RMS) for its weight: on noise-free data
-# every point fits to round-off, and the weights would be round-off's.
-_WEIGHT_FLOOR_MSE = 1e-12
-
-
 def _inverse_variance_weights(statistics: list, R_WC: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray):
     """``joint_weighted``: each point's weight, the inverse of its own mean squared error under the
     camera with its ``p_HP`` (K x 3), scaled to a mean of 1."""
     mse = np.array([mean_squared_error_of(s, pack_x(R_WC, p_WC, p))
                     for s, p in zip(statistics, p_HP, strict=True)])
-    weights = 1.0 / np.maximum(mse, _WEIGHT_FLOOR_MSE)
+    weights = 1.0 / np.maximum(mse, _ROUND_OFF_MSE)
     return weights / weights.mean()
 
 
