@@ -5,7 +5,9 @@ depth rendered by VTK at the scenario's 30 Hz, depth noise on, the person walkin
 prints simulated seconds per wall-clock second (higher is faster; the target is >= 2). Variants:
 the same at 320x240 (the scenario's size before the hand-eye accuracy work moved it to 640x480),
 without the camera (physics and sensors only), and with the Meshcat replay being recorded (what
-``sustain-drake simulate`` does).
+``sustain-drake simulate`` does). Then the render cost per frame of each image at both sizes
+(the sensor's colour and depth ports evaluated at 40 arm postures), which says where a faster
+camera would have to save.
 
     .venv/bin/python bench/bench_station.py [--seconds 10] [--repeat 3] [--variants ...]
 
@@ -19,6 +21,7 @@ import statistics
 import time
 from pathlib import Path
 
+import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from sustain_drake.station import build_station, load_scenario
@@ -58,6 +61,29 @@ def realtime_factor(name: str, seconds: float) -> float:
 VARIANTS = ("hand_eye.yaml", "320x240", "no camera", "with replay")
 
 
+def render_ms(name: str, postures: int = 40) -> dict:
+    """Median wall time (ms) of one colour and one depth render, each at ``postures`` arm
+    postures (a new posture invalidates the cached image, so every call renders)."""
+    diagram = build_station(scenario_variant(name))
+    context = diagram.CreateDefaultContext()
+    sensor = diagram.GetSubsystemByName("rgbd_sensor")
+    plant = diagram.GetSubsystemByName("plant")
+    sensor_context = sensor.GetMyContextFromRoot(context)
+    plant_context = plant.GetMyContextFromRoot(context)
+    q0 = plant.GetPositions(plant_context)
+    result = {}
+    for image, port in (("colour", sensor.color_image_output_port()),
+                        ("depth", sensor.depth_image_32F_output_port())):
+        times = []
+        for k in range(postures + 1):
+            plant.SetPositions(plant_context, q0 + 0.01 * np.sin(k + np.arange(q0.size)))
+            start = time.perf_counter()
+            port.Eval(sensor_context)
+            times.append(time.perf_counter() - start)
+        result[image] = 1e3 * statistics.median(times[1:])  # the first compiles the shaders
+    return result
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0)
@@ -71,6 +97,10 @@ def main() -> None:
         factors = [realtime_factor(name, args.seconds) for _ in range(args.repeat)]
         print(f"  {name:26s} {statistics.median(factors):5.2f}x  "
               f"(runs: {', '.join(f'{f:.2f}' for f in factors)})", flush=True)
+    print("render time per frame (median of 40 postures)")
+    for name in ("hand_eye.yaml", "320x240"):
+        ms = render_ms(name)
+        print(f"  {name:26s} colour {ms['colour']:5.1f} ms, depth {ms['depth']:5.1f} ms", flush=True)
 
 
 if __name__ == "__main__":
