@@ -763,9 +763,7 @@ def _explained(c: Candidate, x, adopted_mse: float, params: CandidateParams) -> 
     """Whether the camera of ``x`` explains the candidate's samples (its own best ``p_HP``) within
     ``observe_consistency`` times the adopted RMS error."""
     R_WC, p_WC = np.asarray(x)[0:9].reshape(3, 3, order="F"), np.asarray(x)[9:12]
-    p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
-    mse = mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP))
-    return mse <= params.observe_consistency**2 * adopted_mse
+    return own_fit(c.statistic, R_WC, p_WC)[1] <= params.observe_consistency**2 * adopted_mse
 
 
 def _fits(c: Candidate, p_CP, X_WH, reference_x, allowable_error: float) -> bool:
@@ -836,15 +834,15 @@ def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> t
     limit = params.joint_consistency**2 * max(best.solution.expected_mse, _ROUND_OFF_MSE)
     members = []
     for _ in range(3 if params.stitch_radius > 0 else 2):
-        members = [c for c in others if mean_squared_error_of(
-            c.statistic, pack_x(R, p_WC, best_p_HP_given_camera(c.statistic, R, p_WC))) <= limit]
+        members = [c for c in others if own_fit(c.statistic, R, p_WC)[1] <= limit]
         if not members:
             return best, [best.statistic]
         statistics = [c.statistic for c in [best] + members]
         if params.stitch_radius > 0:
             statistics = [s for _, s in stitch(statistics, R, p_WC, params.stitch_radius)]
-        P = np.array([best_p_HP_given_camera(s, R, p_WC) for s in statistics])
-        weights = (_inverse_variance_weights(statistics, R, p_WC, P) if params.joint_weighted
+        fits = [own_fit(s, R, p_WC) for s in statistics]
+        P = np.array([p_HP for p_HP, _ in fits])
+        weights = (_inverse_variance_weights(np.array([mse for _, mse in fits])) if params.joint_weighted
                    else np.ones(len(P)))
         refined = refine_joint([w * _S(s) for w, s in zip(weights, statistics, strict=True)], R, p_WC, P)
         if refined is None:
@@ -856,11 +854,9 @@ def _joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> t
     return replace(best, solution=solution), statistics
 
 
-def _inverse_variance_weights(statistics: list, R_WC: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray):
-    """``joint_weighted``: each point's weight, the inverse of its own mean squared error under the
-    camera with its ``p_HP`` (K x 3), scaled to a mean of 1."""
-    mse = np.array([mean_squared_error_of(s, pack_x(R_WC, p_WC, p))
-                    for s, p in zip(statistics, p_HP, strict=True)])
+def _inverse_variance_weights(mse: np.ndarray) -> np.ndarray:
+    """``joint_weighted``: each point's weight, the inverse of its own mean squared error (``own_fit``
+    under the joint camera), scaled to a mean of 1."""
     weights = 1.0 / np.maximum(mse, _ROUND_OFF_MSE)
     return weights / weights.mean()
 
@@ -898,8 +894,7 @@ def stitch(statistics: list, R_WC: np.ndarray, p_WC: np.ndarray, radius: float,
     groups = []  # [indices, summed statistic, its best p_HP, its mean squared error there]
     for i, statistic in enumerate(statistics):
         statistic = np.asarray(statistic, dtype=float)
-        p_HP = best_p_HP_given_camera(statistic, R_WC, p_WC)
-        mse = mean_squared_error_of(statistic, pack_x(R_WC, p_WC, p_HP))
+        p_HP, mse = own_fit(statistic, R_WC, p_WC)
         for group in groups:
             if np.linalg.norm(group[2] - p_HP) > radius:
                 continue
@@ -1301,8 +1296,7 @@ def _blind_evidence(bank, params, row, usable, x, allowable_error: float, before
         k = row.get(c.feature_id)
         if k is None or not usable[k] or c.frames < params.blind_min_samples:
             continue
-        p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
-        misfits.append(mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP)))
+        misfits.append(own_fit(c.statistic, R_WC, p_WC)[1])
     if len(misfits) < 2 or not min(misfits) > allowable_error:
         return bank
     return replace(bank, sample_count=before + 1, sample_error=float(min(misfits)))
@@ -1413,8 +1407,7 @@ def _consistent(bank, params, row, usable, x, frame, exclude=(), verified=False,
             continue  # first tracked while the model was not verified: its p_HP is unchecked
         if rotation_spread(c.statistic) < params.min_rotation_spread:
             continue  # the hand hardly turned: any point, even on another link, would fit
-        p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
-        mse = mean_squared_error_of(c.statistic, pack_x(R_WC, p_WC, p_HP))
+        p_HP, mse = own_fit(c.statistic, R_WC, p_WC)
         if mse <= limit and _error(p_now[k], X_now, pack_x(R_WC, p_WC, p_HP)) <= _NOW_FACTOR * limit:
             out.append((mse, c.feature_id, p_HP, k))
     return out
@@ -1520,3 +1513,10 @@ def best_p_HP_given_camera(statistic: np.ndarray, R_WC: np.ndarray, p_WC: np.nda
     H = S[12:15, 12:15]
     g = S[12:15, :] @ x
     return -np.linalg.lstsq(H, g, rcond=None)[0]
+
+
+def own_fit(statistic: np.ndarray, R_WC: np.ndarray, p_WC: np.ndarray) -> tuple[np.ndarray, float]:
+    """A point's own fit under a camera: its best ``p_HP`` (``best_p_HP_given_camera``) and the mean
+    squared error (m^2) of its samples with it."""
+    p_HP = best_p_HP_given_camera(statistic, R_WC, p_WC)
+    return p_HP, mean_squared_error_of(statistic, pack_x(R_WC, p_WC, p_HP))

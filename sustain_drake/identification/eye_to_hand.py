@@ -486,12 +486,18 @@ class CameraAfterTurn(NamedTuple):
     scene_shift: bool
 
 
+def _robust_scale(errors: np.ndarray) -> float:
+    """1.4826 times the median of non-negative errors (a Gaussian's sigma from its median absolute
+    value), kept off zero for noise-free data."""
+    return max(1.4826 * float(np.median(errors)), 1e-9)
+
+
 def _scene_registration(R, p, b0, q0, b1, q1, far, inliers, used, steps: int = 3):
     """The turn ``R_C0C1`` and shift ``p_C0C1`` that fit the anchors' bearings (``inliers``) and their
     depth on both sides (``used``) together, by Gauss-Newton from ``(R, p)``. The bearings alone
     leave a valley: a turn and a shift along it move a scene at one depth alike; the depth (each
     anchor's ``q0 - R q1 - p``, its noise growing with the depth) tells them apart. Each kind of
-    residual is weighted by its robust scale (1.48 MAD; the depth's scaled by ``z^2``), and depth
+    residual is weighted by its robust scale (``_robust_scale``; the depth's scaled by ``z^2``), and depth
     misfits over three scales are left out (an anchor on a moving thing, a depth edge)."""
     z = np.maximum(np.linalg.norm(q1, axis=1), 0.1)
     b1_x = np.array([skew(v) for v in b1])  # the Jacobians' cross-product matrices, fixed
@@ -511,8 +517,7 @@ def _scene_registration(R, p, b0, q0, b1, q1, far, inliers, used, steps: int = 3
         J_d[:, :, 3:] = -np.eye(3)
         e_b = np.linalg.norm(r_b, axis=1)
         e_d = np.linalg.norm(np.nan_to_num(r_d), axis=1) / z**2
-        s_b = max(1.4826 * float(np.median(e_b[inliers])), 1e-9)
-        s_d = max(1.4826 * float(np.median(e_d[used])), 1e-9)
+        s_b, s_d = _robust_scale(e_b[inliers]), _robust_scale(e_d[used])
         keep = used & (e_d <= 3.0 * s_d)
         w_d = 1.0 / (s_d * z[keep] ** 2)
         A = np.concatenate([(J_b[inliers] / s_b).reshape(-1, 6),
