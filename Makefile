@@ -7,7 +7,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test bench clean
+.PHONY: venv demo test bench docs clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -25,6 +25,10 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/bench_identifier.py
+
+# Regenerates docs/scenarios.md from the scenario dataclasses' field comments.
+docs: $(STAMP)
+	$(PY) -m sustain_drake.station.reference
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -1,5 +1,5 @@
 """Body detection end to end over several seeds (issue 4 targets), through the code path of
-``sustain-drake simulate SCENARIO --seed N`` (``simulate_scenario``).
+``sustain-drake simulate SCENARIO --seed N`` (``experiments.run.simulate_file``).
 
     .venv/bin/python bench/bench_body_detection.py [--seeds 1 2 3 4 5] [--jobs 2]
 
@@ -26,10 +26,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from seeds import meets, run_seeds  # noqa: E402  (bench/seeds.py)
+from seeds import meets, publish, run_seeds  # noqa: E402  (bench/seeds.py)
 
-from sustain_drake.cli.common import write_atomically  # noqa: E402
-from sustain_drake.cli.simulate import simulate_scenario  # noqa: E402
+from sustain_drake.experiments.run import simulate_file  # noqa: E402
+from sustain_drake.files import write_atomically  # noqa: E402
 
 TARGETS = {"precision": (">=", 0.95), "recall": (">=", 0.8),
            "distractor_cells_marked": ("==", 0), "latency_median_s": ("<=", 1.0)}
@@ -61,8 +61,8 @@ def run_seed(scenario: Path, out: Path, duration: float | None, seed: int) -> di
                  (detector_module, "update_feature_memory",
                   _timed(detector_module, "update_feature_memory", logs["features"]))]
     try:
-        result = simulate_scenario(scenario, duration=duration, out=out / f"seed_{seed}",
-                                   replay=False, seed=seed)
+        result = simulate_file(scenario, seed=seed, duration=duration, out=out / f"seed_{seed}",
+                               replay=False)
     finally:
         for module, name, fn in originals:
             setattr(module, name, fn)
@@ -87,20 +87,21 @@ def main(argv=None) -> int:
     p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
     p.add_argument("--jobs", type=int, default=1, help="seeds simulated in parallel")
     p.add_argument("--out", type=Path, default=ROOT / "out" / "bench_body_detection")
+    p.add_argument("--results", action="store_true", help="also write the table on docs/results.md")
     args = p.parse_args(argv)
 
     rows = run_seeds(run_seed, args.seeds, args.jobs, args.scenario, args.out, args.duration)
     header = ("seed", "precision", "recall", "iou", "distr.", "latency median / p90", "true",
               "marked", "recall cells/features", "ms/frame", "wall")
-    print(" | ".join(header))
+    table = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in rows:
         latency = ("n/a" if r["latency_median_s"] is None
                    else f"{r['latency_median_s']:.2f} / {r['latency_p90_s']:.2f} s")
-        print(f"{r['seed']} | {r['precision']:.3f} | {r['recall']:.3f} | {r['iou']:.3f} | "
+        table.append(f"| {r['seed']} | {r['precision']:.3f} | {r['recall']:.3f} | {r['iou']:.3f} | "
               f"{r['distractor_cells_marked']} of {r['distractor_cells']} | {latency} | "
               f"{r['body_cells_true']} | {r['body_cells_marked']} | "
               f"{r['recall_cells']:.2f} / {r['recall_features']:.2f} | "
-              f"{r['ms_per_frame']:.2f} | {r['wall_s']:.0f} s")
+              f"{r['ms_per_frame']:.2f} | {r['wall_s']:.0f} s |")
     summary = {"seeds": args.seeds, "rows": rows, "aggregate": {}, "targets": {}}
     for name, (op, bound) in TARGETS.items():
         values = [r[name] for r in rows]
@@ -111,7 +112,7 @@ def main(argv=None) -> int:
         summary["aggregate"][name] = agg
         summary["targets"][name] = {"target": f"{op} {bound:g}", "met_on_every_seed": ok,
                                     "seeds_met": sum(meets(v, op, bound) for v in values)}
-        print(f"{name}: min {agg['min']}, median {agg['median']}, max {agg['max']} "
+        table.append(f"- {name}: min {agg['min']}, median {agg['median']}, max {agg['max']} "
               f"(target {op} {bound:g}: met on {summary['targets'][name]['seeds_met']} of "
               f"{len(values)} seeds)")
     # The latency over every detected cell of every seed (each seed's median is above).
@@ -120,9 +121,12 @@ def main(argv=None) -> int:
         summary["aggregate"]["latency_pooled_s"] = {
             "cells": len(pooled), "median": statistics.median(pooled),
             "p90": statistics.quantiles(pooled, n=10)[-1] if len(pooled) > 1 else pooled[0]}
-        print(f"latency over all {len(pooled)} detected cells of the {len(rows)} seeds: median "
+        table.append(f"- latency over all {len(pooled)} detected cells of the {len(rows)} seeds: median "
               f"{statistics.median(pooled):.2f} s, p90 "
               f"{summary['aggregate']['latency_pooled_s']['p90']:.2f} s")
+    print("\n".join(table))
+    if args.results:
+        publish("bench_body_detection", table)
     write_atomically(args.out / "summary.json", json.dumps(summary, indent=2) + "\n")
     return 0
 

@@ -1,5 +1,5 @@
 """Hand-eye coordination end to end over several seeds (issue 5 targets), through the code path
-of ``sustain-drake simulate SCENARIO --seed N`` (``simulate_scenario``).
+of ``sustain-drake simulate SCENARIO --seed N`` (``experiments.run.simulate_file``).
 
     .venv/bin/python bench/bench_hand_eye.py [--seeds scenario 1 2 4] [--jobs 2] [--duration 130]
 
@@ -24,10 +24,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from seeds import meets, run_seeds  # noqa: E402  (bench/seeds.py)
+from seeds import meets, publish, run_seeds  # noqa: E402  (bench/seeds.py)
 
-from sustain_drake.cli.common import write_atomically  # noqa: E402
-from sustain_drake.cli.simulate import simulate_scenario  # noqa: E402
+from sustain_drake.experiments.run import simulate_file  # noqa: E402
+from sustain_drake.files import write_atomically  # noqa: E402
 
 # target name -> (how a seed's figures are read, op, bound); a list is met when every item is.
 TARGETS = {
@@ -45,10 +45,10 @@ TARGETS = {
 }
 
 
-def run_seed(scenario: Path, out: Path, duration: float | None, seed: int | None) -> dict:
-    """One run's figures; ``seed`` None keeps the scenario's own seeds."""
-    result = simulate_scenario(scenario, duration=duration, out=out / f"seed_{_name(seed)}", replay=False,
-                               seed=seed)
+def run_seed(scenario: tuple[Path, str | None], out: Path, duration: float | None, seed: int | None) -> dict:
+    """One run's figures of scenario ``(file, name)``; ``seed`` None keeps the scenario's own seeds."""
+    result = simulate_file(*scenario, seed=seed, duration=duration, out=out / f"seed_{_name(seed)}",
+                           replay=False)
     m = json.loads(result.metrics.read_text())["hand_eye"]
     adopted = m["adopted"]
     disturbances = m["disturbances"]
@@ -93,17 +93,20 @@ def _fmt(value, spec: str = ".2f") -> str:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenario", type=Path, default=ROOT / "diagrams" / "hand_eye.yaml")
+    p.add_argument("--scenario-name", help="which scenario of the file (default: the one named like it)")
     p.add_argument("--seeds", type=_seed, nargs="+", default=[None, 1, 2, 4],
                    help="motion seeds; 'scenario': the scenario's own (default: scenario 1 2 4)")
     p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
     p.add_argument("--jobs", type=int, default=1, help="seeds simulated in parallel")
     p.add_argument("--out", type=Path, default=ROOT / "out" / "bench_hand_eye")
+    p.add_argument("--results", action="store_true", help="also write the table on docs/results.md")
     args = p.parse_args(argv)
 
-    rows = run_seeds(run_seed, args.seeds, args.jobs, args.scenario, args.out, args.duration)
-    print("| seed | first convergence after found | adoptions: time, kind, camera mm / deg, tool point mm "
-          "| changes: time, detected after, re-converged after | false alarms | wall |")
-    print("|---|---|---|---|---|---|")
+    rows = run_seeds(run_seed, args.seeds, args.jobs, (args.scenario, args.scenario_name), args.out,
+                     args.duration)
+    table = ["| seed | first convergence after found | adoptions: time, kind, camera mm / deg, tool point mm "
+             "| changes: time, detected after, re-converged after | false alarms | wall |",
+             "|---|---|---|---|---|---|"]
     for r in rows:
         m = r["metrics"]
         adoptions = "; ".join(
@@ -114,14 +117,17 @@ def main(argv=None) -> int:
             f"{_fmt(d['reconvergence_after_detection_s'], '.1f')} s" for d in m["disturbances"])
         alarms = ", ".join(f"{t:.1f} s" for t in m["false_alarms_s"]) or "0"
         first = _fmt(r["first_convergence_after_found_s"], ".1f")
-        print(f"| {r['seed']} | {first} s | {adoptions or 'none'} | {changes} | {alarms} "
-              f"| {r['wall_s']:.0f} s |")
+        table.append(f"| {r['seed']} | {first} s | {adoptions or 'none'} | {changes} | {alarms} "
+                     f"| {r['wall_s']:.0f} s |")
     summary = {"seeds": [_name(x) for x in args.seeds], "rows": rows, "targets": {}}
     for name, (op, bound) in TARGETS.items():
         met = [_met(r[name], op, bound) for r in rows]
         summary["targets"][name] = {"target": f"{op} {bound:g}", "seeds_met": sum(met),
                                     "met_on_every_seed": all(met)}
-        print(f"{name} {op} {bound:g}: met on {sum(met)} of {len(rows)} seeds")
+        table.append(f"- {name} {op} {bound:g}: met on {sum(met)} of {len(rows)} seeds")
+    print("\n".join(table))
+    if args.results:
+        publish("bench_hand_eye" + (f"_{args.scenario_name}" if args.scenario_name else ""), table)
     write_atomically(args.out / "summary.json", json.dumps(summary, indent=2, default=str) + "\n")
     return 0
 

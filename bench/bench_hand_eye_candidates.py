@@ -35,7 +35,6 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from sustain_drake.cli.simulate import apply_seed
 from sustain_drake.experiments import hand_eye
 from sustain_drake.identification.candidates import (
     best_p_HP_given_camera,
@@ -52,6 +51,7 @@ from sustain_drake.perception.point_refinement import (
     refine_points,
 )
 from sustain_drake.station import build_station, camera_info, load_scenario
+from sustain_drake.station.scenario import with_seed
 from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,7 +92,7 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
     # A path, or a scenario already loaded (and changed) by the caller.
     scenario = load_scenario(scenario_path) if isinstance(scenario_path, (str, Path)) else scenario_path
     if seed is not None:
-        apply_seed(scenario, seed)
+        scenario = with_seed(scenario, seed)
     builder = DiagramBuilder()
     station = builder.AddSystem(build_station(scenario))
     handle = hand_eye.add_to_diagram(builder, station, scenario, None)
@@ -218,7 +218,7 @@ def main() -> None:
     parser.add_argument("--refine", action="store_true",
                         help="map the refined points (hand_eye.refinement) instead of the tracker's")
     args = parser.parse_args()
-    scenario_refinement = load_scenario(args.scenario).hand_eye.refinement.params()
+    scenario_refinement = load_scenario(args.scenario).hand_eye.refinement
     refinement = scenario_refinement if args.refine else None
     out = run(args.scenario, args.duration, refinement, scenario_refinement, args.seed)
     R_WC, p_WC = out["X_WC"][:3, :3], out["X_WC"][:3, 3]

@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from bench_hand_eye_candidates import run  # noqa: E402  (bench/bench_hand_eye_candidates.py)
 
-from sustain_drake.cli.common import write_atomically  # noqa: E402
+from sustain_drake.files import write_atomically  # noqa: E402
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, refine_joint  # noqa: E402
 from sustain_drake.identification.rotation import rotation_angle  # noqa: E402
 from sustain_drake.station import load_scenario  # noqa: E402
@@ -179,7 +179,7 @@ def main() -> None:
     if args.resolution:
         scenario.camera.width, scenario.camera.height = args.resolution
         name += f"_{args.resolution[0]}x{args.resolution[1]}"
-    refinement = scenario.hand_eye.refinement.params()
+    refinement = scenario.hand_eye.refinement
     out = run(scenario, args.duration, refinement, refinement, args.seed)
     b = budget(out, args.max_gap, args.noise_along, args.noise_across)
     report(b)

@@ -15,14 +15,18 @@ contact forces >= 5 N), touches felt, false touch samples.
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from sustain_drake.experiments import kinesthetic
-from sustain_drake.station import build_station, load_scenario
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from seeds import publish  # noqa: E402  (bench/seeds.py)
+
+from sustain_drake.experiments import kinesthetic  # noqa: E402
+from sustain_drake.station import build_station, load_scenario  # noqa: E402
 
 SCENARIO = Path(__file__).resolve().parents[1] / "diagrams" / "inertia_touch.yaml"
 
@@ -47,10 +51,12 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[11, 1, 2, 3, 4])
     parser.add_argument("--duration", type=float, default=80.0)
     parser.add_argument("--gap", type=float, help="override the payload's min_gap_ratio")
+    parser.add_argument("--results", action="store_true", help="also write the table on docs/results.md")
     args = parser.parse_args()
-    print("| seed | identified (s) | mass error (%) | CoM error (mm) | touch median / max (mm) "
-          "| touches felt | false touch samples | re-identifications |")
-    print("|---|---|---|---|---|---|---|---|")
+    table = ["| seed | identified (s) | mass error (%) | CoM error (mm) | touch median / max (mm) "
+             "| touches felt | false touch samples | re-identifications |",
+             "|---|---|---|---|---|---|---|---|"]
+    print("\n".join(table))
     for seed in args.seeds:
         m = run(seed, args.duration, args.gap)
         t = m["touch"]
@@ -59,7 +65,10 @@ def main() -> None:
                  _num(m.get("com_error_mm"), ".2f"),
                  f"{_num(t['median_mm'], '.2f')} / {_num(t['max_mm'], '.2f')}",
                  str(t.get("touches_felt", "-")), str(t["false_touch_samples"]), str(m["change_detections"])]
-        print("| " + " | ".join(cells) + " |", flush=True)
+        table.append("| " + " | ".join(cells) + " |")
+        print(table[-1], flush=True)
+    if args.results:
+        publish("bench_kinesthetic", table)
 
 
 def _num(value, fmt: str) -> str:

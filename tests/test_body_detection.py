@@ -14,11 +14,11 @@ from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from sustain_drake.cli.common import CliError
-from sustain_drake.cli.simulate import apply_seed, simulate_scenario
 from sustain_drake.experiments import body_detection
-from sustain_drake.experiments.body_detection_config import BodyDetectionConfig
+from sustain_drake.experiments.run import simulate_file
+from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.station import ScenarioError, build_station, load_scenario
+from sustain_drake.station.scenario import with_seed
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "diagrams" / "body_detection.yaml"
@@ -38,7 +38,7 @@ def small_scenario(tmp_path: Path, extra: str = "") -> Path:
 def short_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("body_detection")
     out = tmp / "out"
-    result = simulate_scenario(small_scenario(tmp), duration=6.0, out=out, replay=False, seed=3)
+    result = simulate_file(small_scenario(tmp), seed=3, out=out, duration=6.0, replay=False)
     return out, json.loads(result.metrics.read_text())
 
 
@@ -104,18 +104,17 @@ def test_the_scenario_section_builds_the_rule_and_rejects_bad_values():
 def test_seed_overrides_motion_noise_and_distractor_start():
     a, b = load_scenario(SCENARIO), load_scenario(SCENARIO)
     start = a.distractor.start_time
-    apply_seed(a, 11)
-    apply_seed(b, 12)
+    a, b = with_seed(a, 11), with_seed(b, 12)
     assert a.motion.seed == 11 and b.motion.seed == 12
     assert len({a.motion.seed, a.depth_noise.seed, a.wrench_sensor.seed}) == 3
     assert a.depth_noise.seed != b.depth_noise.seed
     assert start <= a.distractor.start_time <= start + 3.0
     assert a.distractor.start_time != b.distractor.start_time
     c = load_scenario(SCENARIO)
-    apply_seed(c, 11)
+    c = with_seed(c, 11)
     assert c.distractor.start_time == a.distractor.start_time   # reproducible
-    with pytest.raises(CliError, match="--seed"):
-        apply_seed(c, -1)
+    with pytest.raises(ScenarioError, match="seed must be an integer >= 0"):
+        with_seed(c, -1)
 
 
 def test_evaluation_state_clones_with_the_context():

@@ -13,6 +13,7 @@ from test_candidates import CRITERIA, DT, HANDOVER, P_TOOL, TRUTH, hand_pose, se
 
 from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank
+from sustain_drake.identification.coordination import CAMERA_MOVED
 from sustain_drake.identification.eye_to_hand import build_A, camera_after_turn, pack_x
 from sustain_drake.identification.rotation import nearest_rotation
 from sustain_drake.perception import camera_motion
@@ -179,8 +180,9 @@ POINTS = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, 
 def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399 * DT, 404 * DT),
                   resets=(400,), ended=None, body_after=True, static_after=None):  # fmt: skip
     """Three tool points observed under the true model; at frame 400 the head turns (``TURN`` about
-    ``PIVOT_C``: 10 deg, 8 mm) and the state machine resets with the model cleared. Every track ends
-    at the turn: the same points come back as new tracks (ids + 100), or ``new_points`` instead.
+    ``PIVOT_C``: 10 deg, 8 mm) and the state machine resets for the camera's move, the model
+    cleared. Every track ends at the turn: the same points come back as new tracks (ids + 100), or
+    ``new_points`` instead.
     ``turn_of(X0, X1)``: the scene turn given from frame 405 on, its episode over ``window`` (s;
     None: no turn); the state machine's reset counts up at each frame of ``resets``; ``ended``: more
     points of the hand, tracked only over frames 100-300 before the move; ``body_after``: whether
@@ -213,7 +215,7 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
         bank = candidates.step(bank, params, CRITERIA, k * DT, reset, X, k * DT,
                                np.array(ids), np.array(p), np.ones(len(p), bool),
                                np.array(body), adopted,
-                               allowable_error=1e-4, scene_turn=given)  # fmt: skip
+                               allowable_error=1e-4, scene_turn=given, reset_reason=CAMERA_MOVED)  # fmt: skip
         if after and bank.leader >= 0:
             return bank, k
     return bank, None

@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank, CandidateParams
+from sustain_drake.identification.coordination import CAMERA_MOVED
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, default_criteria, pack_x
 
 CRITERIA = default_criteria()
@@ -656,8 +657,9 @@ _SLIDES = {9: [0.0, 0.0, 0.03], 4: [0.02, 0.0, 0.0], 5: [0.0, -0.025, 0.0], 6: [
 
 def test_after_a_camera_move_the_tool_points_are_kept_and_only_the_camera_is_new():
     """``keep_tool_points``: five tool points observed under the true model; at frame 400 the camera
-    turns by 9 degrees and moves 5 cm, and the state machine resets with the model cleared. The tracks
-    that outlive the move keep their ``p_HP``, and once they have ``observe_min_samples`` samples
+    turns by 9 degrees and moves 5 cm, and the state machine resets for the camera's move, the
+    model cleared. The tracks that outlive the move keep their ``p_HP``, and once they have
+    ``observe_min_samples`` samples
     the camera is solved from them alone (closed form), well before an identification of all 16
     unknowns; a track that slid onto another point since (a wrong ``p_HP``) is left out."""
     points = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05],
@@ -680,7 +682,7 @@ def test_after_a_camera_move_the_tool_points_are_kept_and_only_the_camera_is_new
                        else pack_x(X_WC[:3, :3], X_WC[:3, 3], points[bank.leader]))
             bank = candidates.step(bank, params, CRITERIA, k * DT, float(after), X, k * DT,
                                    np.array(list(points)), np.array(p), np.ones(5, bool), np.ones(5, bool),
-                                   adopted, allowable_error=1e-4)
+                                   adopted, allowable_error=1e-4, reset_reason=CAMERA_MOVED)
             if after and bank.leader >= 0:
                 return bank, k
         return bank, None

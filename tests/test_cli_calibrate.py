@@ -163,7 +163,7 @@ def test_atomic_write_gives_normal_permissions_and_keeps_existing_ones(tmp_path)
     import os
     import stat
 
-    from sustain_drake.cli.common import write_atomically
+    from sustain_drake.files import write_atomically
 
     new = tmp_path / "new.txt"
     write_atomically(new, "a")

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import coordination
 from sustain_drake.identification.coordination import CoordinationRule
-from sustain_drake.sustainable_coordination import connect_identify_observe
+from sustain_drake.loops.identify_observe import connect_identify_observe
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.sustainable_identifier_system import (
     EyeToHandFormulation,

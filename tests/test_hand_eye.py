@@ -18,10 +18,10 @@ from sustain_drake.experiments import hand_eye
 from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import own_fit
 from sustain_drake.identification.rotation import rotation_angle
+from sustain_drake.loops.identify_observe import connect_identify_observe
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.station import build_station, load_scenario
 from sustain_drake.station.scenario import HeadMove, ToolSlip
-from sustain_drake.sustainable_coordination import connect_identify_observe
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
@@ -76,7 +76,7 @@ def test_scripted_tool_point_on_the_station_detects_a_slip_and_a_head_move():
     for name in ("X_WH", "true_X_WC", "true_p_HP"):
         builder.Connect(station.GetOutputPort(name), source.GetInputPort(name))
     candidates = builder.AddSystem(CandidateIdentifiers(
-        EyeToHandFormulation(config.criteria()), scenario.hand_eye.candidates.params(), PERIOD))
+        EyeToHandFormulation(config.criteria()), scenario.hand_eye.candidates, PERIOD))
     machine = builder.AddSystem(CoordinationStateMachine(16, config.rule(), PERIOD))
     builder.Connect(source.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
     builder.Connect(source.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))

@@ -12,7 +12,7 @@ from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U, Imag
 from test_sustainable_coordination import MASS, P_KCM, payload_wrench, sensor_noise, three_joint_arm
 
 from sustain_drake.identification import coordination
-from sustain_drake.sustainable_coordination import (
+from sustain_drake.loops.lcm_bridge import (
     LCM_INPUT_CHANNELS,
     LCM_OUTPUT_CHANNELS,
     make_lcm_bridge,

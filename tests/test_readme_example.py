@@ -6,11 +6,14 @@ from pathlib import Path
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
-def readme_example() -> str:
-    text = README.read_text(encoding="utf-8")
+CONTROLLER_PAGE = README.parent / "docs" / "controller.md"
+
+
+def readme_example(page: Path = README) -> str:
+    text = page.read_text(encoding="utf-8")
     match = re.search(r"<!-- controller-example -->\n```python\n(.*?)```\n<!-- /controller-example -->", text,
                       re.DOTALL)  # fmt: skip
-    assert match, "README.md lost its controller-example block"
+    assert match, f"{page.name} lost its controller-example block"
     return match.group(1)
 
 
@@ -29,3 +32,7 @@ def test_readme_controller_example_runs(capsys):
     assert X_WH.IsNearlyEqualTo(namespace["hand"].CalcPoseInWorld(plant_context), 1e-12)
     # It followed the arm: the acrobot swung away from where it started.
     assert abs(plant.GetPositions(plant_context) - [0.5, -0.3]).max() > 0.05
+
+
+def test_the_controller_page_shows_the_same_example():
+    assert readme_example(CONTROLLER_PAGE) == readme_example()

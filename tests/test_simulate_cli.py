@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from sustain_drake.cli.main import main
+from sustain_drake.station.scenario import load_scenario_string, scenario_text
 
 ROOT = Path(__file__).resolve().parents[1]
 HAND_EYE = ROOT / "diagrams" / "hand_eye.yaml"
@@ -30,7 +31,10 @@ def test_simulate_writes_a_replay_and_logs(tmp_path, capsys):
     assert log["X_WH"].shape == (len(t), 4, 4)
     np.testing.assert_allclose(log["X_WH"][:, 3], [[0, 0, 0, 1]] * len(t))
     assert np.all(np.isfinite(log["true_X_WC"]))
-    assert "ToolSlip" in str(log["scenario"])
+    # The scenario as run, every key written out: it loads back to the same scenario.
+    ran = str(log["scenario"])
+    assert "slide: 0.04" in ran and "!HeadMove" in ran and "max_candidates: 8" in ran
+    assert scenario_text(load_scenario_string(ran)) == ran
 
 
 def test_graph_writes_dot(tmp_path, capsys):

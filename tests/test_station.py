@@ -288,41 +288,49 @@ def test_backdrop_gives_the_static_scene_corners():
     assert 3.5 < posters_depth < 5.0 and abs(posters_depth - plain_depth) < 0.1
 
 
-def test_the_steady_run_is_hand_eye_without_disturbances():
-    """``diagrams/hand_eye_steady.yaml`` (the 10-minute run for false alarms) is
-    ``diagrams/hand_eye.yaml`` for 600 s without the slip and the head move: nothing else differs, so
-    a key changed in one and not the other shows here."""
-    base = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
-    steady = load_scenario(ROOT / "diagrams" / "hand_eye_steady.yaml")
-    assert (steady.duration, steady.disturbances) == (600.0, [])
-    assert len(base.disturbances) == 2
+def test_named_variants_are_merges_of_the_base_scenario():
+    """``hand_eye_steady`` and ``hand_eye_pinned_camera`` are YAML merges of ``hand_eye`` in one file:
+    the steady run differs in its duration and disturbances only, the pinned variant in its keys only."""
+    path = ROOT / "diagrams" / "hand_eye.yaml"
+    base = load_scenario(path)  # the one named like the file
+    assert yaml_dump_typed(base) == yaml_dump_typed(load_scenario(path, "hand_eye"))
+    steady = load_scenario(path, "hand_eye_steady")
+    assert (steady.duration, steady.disturbances, len(base.disturbances)) == (600.0, [], 2)
     steady.duration, steady.disturbances = base.duration, base.disturbances
     assert yaml_dump_typed(steady) == yaml_dump_typed(base)  # Drake's configs define no ==
-
-
-def test_the_pinned_camera_variant_is_hand_eye_with_its_keys():
-    """``bench/hand_eye_pinned_camera.yaml`` (a variant measured in the README) is
-    ``diagrams/hand_eye.yaml`` with views, not frames, the rotation lever and the reach of the
-    identifying motion while waiting for it: nothing else differs."""
-    base = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
-    variant = load_scenario(ROOT / "bench" / "hand_eye_pinned_camera.yaml")
-    keys = variant.hand_eye.candidates
-    assert (keys.min_view_change, keys.min_rotation_lever) == (0.001, 0.015)
-    assert variant.hand_eye.coordination.min_samples == 100
-    keys.min_view_change, keys.min_rotation_lever = 0.0, 0.0
+    variant = load_scenario(path, "hand_eye_pinned_camera")
+    keys, shipped = variant.hand_eye.candidates, base.hand_eye.candidates
+    changed = {"min_view_change": (0.001, 0.0), "min_rotation_lever": (0.015, 0.0),
+               "motion_min_samples": (0, 30), "joint_consistency": (3.0, 2.0),
+               "turn_admit_known": (False, True), "joint_weighted": (False, True)}
+    for key, (theirs, ours) in changed.items():
+        assert (getattr(keys, key), getattr(shipped, key)) == (theirs, ours), key
+        setattr(keys, key, ours)
+    hand_eye = variant.hand_eye
+    assert (hand_eye.coordination.min_samples, hand_eye.identifying_motion_reach) == (100, 0.3)
     variant.hand_eye.coordination.min_samples = base.hand_eye.coordination.min_samples
-    assert variant.hand_eye.identifying_motion_reach == 0.3
     variant.hand_eye.identifying_motion_reach = base.hand_eye.identifying_motion_reach
-    # Measured before the reach came from the first tracked point and the joint's own consistency:
-    # those keys at their defaults (off, 3), as then.
-    assert (keys.motion_min_samples, keys.joint_consistency) == (0, 3.0)
-    keys.motion_min_samples, keys.joint_consistency = 30, 2.0
-    shipped = base.hand_eye.candidates
-    assert (shipped.motion_min_samples, shipped.joint_consistency) == (30, 2.0)
-    # And before the admission at known points after a move (session 11): off, as then.
-    assert keys.turn_admit_known is False
-    # And before the weighted joint refinement (session 12): off, as then.
-    assert keys.joint_weighted is False
-    keys.turn_admit_known = keys.joint_weighted = True
-    assert shipped.turn_admit_known is True and shipped.joint_weighted is True
-    assert repr(variant) == repr(base)
+    assert yaml_dump_typed(variant) == yaml_dump_typed(base)
+
+
+def test_a_file_of_named_scenarios_is_read_by_name(tmp_path):
+    """One scenario per file, or several by name; every wrong name is a one-line error naming the
+    choices."""
+    plain = tmp_path / "plain.yaml"
+    plain.write_text("duration: 3.0\n")
+    assert load_scenario(plain).duration == 3.0
+    with pytest.raises(ScenarioError, match="holds one scenario"):
+        load_scenario(plain, "plain")
+    named = tmp_path / "two.yaml"
+    named.write_text("a: &a\n  duration: 4.0\nb:\n  <<: *a\n  duration: 5.0\n")
+    assert (load_scenario(named, "a").duration, load_scenario(named, "b").duration) == (4.0, 5.0)
+    with pytest.raises(ScenarioError, match=r"holds the scenarios a, b: name one"):
+        load_scenario(named)
+    with pytest.raises(ScenarioError, match=r"has no scenario 'c' \(it has a, b\)"):
+        load_scenario(named, "c")
+    named.write_text("a:\n  duration: -1.0\n")
+    with pytest.raises(ScenarioError, match=r"two.yaml \[a\]: duration must be a positive number"):
+        load_scenario(named)  # the only one
+    named.write_text("- 1\n- 2\n")
+    with pytest.raises(ScenarioError, match="a mapping of keys to values"):
+        load_scenario(named)

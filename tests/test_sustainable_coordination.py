@@ -17,9 +17,9 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
 
-from sustain_drake.experiments.hand_eye_config import HandEyeConfig
 from sustain_drake.identification import coordination
-from sustain_drake.sustainable_coordination import make_sustainable_coordination
+from sustain_drake.loops.coordination import make_sustainable_coordination
+from sustain_drake.loops.hand_eye import HandEyeConfig
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
 
 MASS, P_KCM = 0.8, np.array([0.02, -0.01, 0.09])  # the held payload, kg and m in K

@@ -10,9 +10,9 @@ from pydrake.systems.framework import DiagramBuilder
 
 from sustain_drake.identification import coordination
 from sustain_drake.identification.rotation import rotation_angle
+from sustain_drake.loops.coordination import make_sustainable_coordination
 from sustain_drake.station import build_station, camera_info, load_scenario
 from sustain_drake.station.scenario import ARM_JOINTS
-from sustain_drake.sustainable_coordination import make_sustainable_coordination
 
 ROOT = Path(__file__).resolve().parents[1]
 

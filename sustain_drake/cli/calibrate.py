@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from sustain_drake.calibration_export import camera_config_yaml
-from sustain_drake.cli.common import EXIT_NOT_CONVERGED, EXIT_OK, CliError, write_atomically
+from sustain_drake.cli.common import EXIT_NOT_CONVERGED, EXIT_OK, CliError
+from sustain_drake.files import write_atomically
 from sustain_drake.identification import ConvergenceCriteria, IdentificationError, calibrate_eye_to_hand
 from sustain_drake.identification import eye_to_hand as eye_to_hand_formulation
 from sustain_drake.recorded_data import (
@@ -35,7 +36,7 @@ def register(subparsers) -> None:
         "eye-to-hand",
         help="camera pose in the world and a hand point, from one tracked point (paper §3.4)",
         description="Eye-to-hand calibration from a fixed camera's 3-D measurements of one point on the "
-        "hand. CSV formats: see the README (points: x,y,z in metres in the camera frame; poses: "
+        "hand. CSV formats: see docs/identification.md (points: x,y,z in metres in the camera frame; poses: "
         "x,y,z,qw,qx,qy,qz or x,y,z,roll,pitch,yaw of the hand in the world).",
     )
     p.add_argument("--points", required=True, type=Path, help="CSV of the point in the camera frame (m)")

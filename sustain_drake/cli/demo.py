@@ -14,8 +14,9 @@ from pathlib import Path
 
 from sustain_drake.cli.calibrate import run_eye_to_hand
 from sustain_drake.cli.common import CliError
-from sustain_drake.cli.simulate import simulate_scenario
+from sustain_drake.experiments.run import RunError, simulate_file
 from sustain_drake.identification import eye_to_hand
+from sustain_drake.station import ScenarioError
 
 REPO = Path(__file__).resolve().parents[2]
 REAL_DATA = REPO / "tests" / "data" / "jin_eyetobase_rvc_single"
@@ -40,8 +41,11 @@ def run(args) -> int:
     )
     print(f"== 2. {SIMULATED_SECONDS:g} simulated seconds of the hand-eye world "
           "(diagrams/hand_eye.yaml, headless)")
-    result = simulate_scenario(REPO / "diagrams" / "hand_eye.yaml", duration=SIMULATED_SECONDS,
-                               out=args.out / "simulation")
+    try:
+        result = simulate_file(REPO / "diagrams" / "hand_eye.yaml", out=args.out / "simulation",
+                               duration=SIMULATED_SECONDS)
+    except (ScenarioError, RunError) as e:
+        raise CliError(str(e)) from None
     print(f"simulated in {result.wall:.1f} s ({result.realtime_factor:.1f}x real time); "
           f"logs: {result.log}")
     print(f"open the replay in a browser: {result.replay}")

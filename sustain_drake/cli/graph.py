@@ -7,7 +7,8 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from sustain_drake.cli.common import EXIT_OK, CliError, write_atomically
+from sustain_drake.cli.common import EXIT_OK, CliError
+from sustain_drake.files import write_atomically
 from sustain_drake.station import ScenarioError, build_station, load_scenario
 
 

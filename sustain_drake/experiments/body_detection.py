@@ -28,8 +28,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.sensors import ImageLabel16I, ImageRgba8U
 
-from sustain_drake.cli.common import write_atomically
-from sustain_drake.experiments.body_detection_config import BodyDetectionConfig
+from sustain_drake.files import write_atomically
+from sustain_drake.loops.body_detection import BodyDetectionConfig, add_body_detection
 from sustain_drake.perception.evaluation import (
     EpisodeEvaluator,
     draw_likelihood_map,
@@ -186,33 +186,18 @@ def add_to_diagram(builder, station, scenario, meshcat=None) -> BodyDetectionHan
     config = scenario.body_detection
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("image_time")):
         raise ScenarioError("body_detection needs the camera's color image (camera.rgb: true)")
-    try:
-        params = config.coincidence_params()
-        feature_params = config.feature_params()
-        tracker_params = config.tracker_params()
-    except ValueError as e:
-        raise ScenarioError(f"body_detection: {e}") from None
     info = camera_info(scenario)
     period = 1.0 / scenario.camera.fps
-    # The tracker runs a quarter frame after the camera samples and the detector half a frame
-    # after, so the detector sees this frame's flow with the encoders half a frame later: the
-    # visual response lags the actuator by the physics only, not by two frames of pipeline.
-    tracker = builder.AddSystem(OpticalFlowTracker(
-        info, (config.grid_rows, config.grid_cols), period=period, offset=0.25 * period,
-        params=tracker_params))
-    tracker.set_name("optical_flow_tracker")
-    n_c = tracker.grid.num_cells
-    detector = builder.AddSystem(MotionCoincidenceDetector(
-        len(ARM_JOINTS), n_c, period=period, offset=0.5 * period, params=params,
-        feature_params=feature_params))
-    detector.set_name("motion_coincidence_detector")
+    try:
+        loop = add_body_detection(builder, info, len(ARM_JOINTS), scenario.camera.fps, config)
+    except ValueError as e:
+        raise ScenarioError(f"body_detection: {e}") from None
+    tracker, detector = loop.tracker, loop.detector
     for name in ("color_image", "depth_image", "image_time"):
         if station.HasOutputPort(name):
             builder.Connect(station.GetOutputPort(name), tracker.GetInputPort(name))
     builder.Connect(station.GetOutputPort("joint_positions"),
                     detector.GetInputPort("actuator_positions"))
-    for name in ("visual_change", "tracked_features"):
-        builder.Connect(tracker.GetOutputPort(name), detector.GetInputPort(name))
     if config.confirm:
         confirm = station.GetInputPort("motion_confirm")
         if builder.IsConnectedOrExported(confirm):

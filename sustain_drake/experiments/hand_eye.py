@@ -28,14 +28,14 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
-from sustain_drake.cli.common import write_atomically
+from sustain_drake.files import write_atomically
 from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import best_p_HP_given_camera
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
+from sustain_drake.loops.hand_eye import add_hand_eye_loop
 from sustain_drake.station import ScenarioError, camera_info
 from sustain_drake.station.scenario import ARM_JOINTS, HeadMove, ToolSlip
-from sustain_drake.sustainable_coordination import add_hand_eye_loop
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine

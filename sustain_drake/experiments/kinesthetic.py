@@ -19,15 +19,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from sustain_drake.cli.common import write_atomically
+from sustain_drake.files import write_atomically
 from sustain_drake.identification import coordination
-from sustain_drake.station.build import HAND_BODY, SENSOR_JOINT
+from sustain_drake.loops.payload import add_payload_loop
+from sustain_drake.station import held_shape, sensor_pose_in_hand
 from sustain_drake.station.scenario import ARM_JOINTS
-from sustain_drake.sustainable_coordination import add_payload_loop
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.sustainable_identifier_system import SustainableIdentifierSystem
 from sustain_drake.systems.touch_estimator import TouchEstimator
@@ -44,28 +43,11 @@ class KinestheticHandle:
     eval_min_force: float
 
 
-def held_shape(station):
-    """The held tool's collision shape (a ``pydrake.geometry`` shape) and its pose ``X_KG`` in the
-    sensor frame K at the nominal grasp, from the station's plant and SceneGraph."""
-    plant = station.GetSubsystemByName("plant")
-    inspector = station.GetSubsystemByName("scene_graph").model_inspector()
-    tool = plant.GetBodyByName("tool")
-    geometries = plant.GetCollisionGeometriesForBody(tool)
-    if len(geometries) != 1:
-        raise ValueError(f"the held tool needs exactly one collision geometry, it has {len(geometries)}")
-    context = plant.CreateDefaultContext()
-    X_WK = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName(HAND_BODY)) @ (
-        plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame())
-    X_KG = X_WK.inverse() @ plant.EvalBodyPoseInWorld(context, tool) @ inspector.GetPoseInFrame(geometries[0])
-    return inspector.GetShape(geometries[0]), RigidTransform(X_KG)
-
-
 def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> KinestheticHandle:
     config = scenario.kinesthetic
     if scenario.tool.model == "none":
         raise ValueError("kinesthetic: the scenario holds no tool")
-    plant = station.GetSubsystemByName("plant")
-    if not plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame().IsExactlyIdentity():
+    if not sensor_pose_in_hand(station).IsExactlyIdentity():
         raise ValueError("kinesthetic: the sensor frame K must be the hand frame H (X_WH is used as X_WK)")
     shape, X_KG = held_shape(station)
     loop = add_payload_loop(builder, len(ARM_JOINTS), config, shape, X_KG)

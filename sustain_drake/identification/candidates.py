@@ -38,7 +38,7 @@ system in an abstract state):
   points or not.
 """
 
-from __future__ import annotations
+# No "from __future__ import annotations": yaml_load_typed reads CandidateParams' real field types.
 
 import math
 from collections.abc import Callable
@@ -46,6 +46,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from sustain_drake.identification.coordination import CAMERA_MOVED, NO_RESET
 from sustain_drake.identification.eye_to_hand import (
     EyeToHandEstimate,
     EyeToHandIdentifier,
@@ -66,241 +67,108 @@ from sustain_drake.identification.sustainable_identifier import (
 )
 
 
-@dataclass(frozen=True)
+@dataclass
 class CandidateParams:
-    """Bookkeeping thresholds (SI units).
+    """Bookkeeping thresholds of the candidate identifiers (SI units).
 
-    Attributes:
-        max_candidates: identifiers run at a time.
-        max_hand_radius: m, the farthest a tracked point on the hand or its tool can be from the
-            hand origin (the motion gate).
-        gate_margin: m, added to the motion gate's bound (depth noise of two frames).
-        max_lost_time: s without a sample before a candidate's slot is freed.
-        max_unconverged_time: s after admission before a candidate that has not converged is
-            rejected (until the next reset).
-        reject_rms: m; a candidate with enough samples (the criteria's ``min_samples``) whose
-            expected RMS error is above this is rejected at once (not a point of the hand).
-        use_body_cells: also admit features that lie in a body cell (after the confirmed body
-            features): the hand formulation rejects the background corners among them.
-        observation_jump: m; an observed point that moves more than the motion gate plus this
-            between two frames is a tracking failure (the track jumped to the background, a depth
-            hole): the observed feature is dropped and re-acquired, the sample is no evidence.
-        observe_min_samples, observe_consistency: when the observed point is lost and not
-            re-acquired, another candidate with at least ``observe_min_samples`` samples takes
-            over the observation if its samples, under the adopted camera and its own best
-            ``p_HP`` (least squares from its statistic), have an RMS error at most
-            ``observe_consistency`` times the adopted one's.
-        primary_failures: samples the observed point alone violates the allowable error (its
-            witness does not) before it is taken for a tracking failure and the witness replaces it.
-        keep_camera: after a reset, a candidate with ``keep_camera_min_samples`` samples that the
-            abandoned model's camera explains (``observe_consistency``) leads at once with that
-            camera and its own ``p_HP`` (a slipped tool: only the tool point changed).
-        keep_camera_min_samples: samples a candidate needs to lead with the kept camera when the
-            camera is known not to have moved (``step``'s ``scene_still_since``: the static scene
-            judged still since before the reset; else ``observe_min_samples``). Only its ``p_HP``
-            is new then (3 unknowns; the hand's turning, ``min_rotation_spread``, is what tells a
-            point of the hand from one of another link), so fewer can do: after a slip the rod may
-            turn out of view before any new track has 100. Unknown to have stayed, a camera that
-            turned is explained by the old one with a wrong ``p_HP`` over a short, narrow motion.
-        confirm_with_witness: a converged candidate leads only if another candidate (with at least
-            ``observe_min_samples`` samples) is explained by its camera within
-            ``observe_consistency``: a wrong camera that happens to fit one track is not adopted.
-        min_rotation_spread: rad; a candidate is only taken as consistent with a camera (witness,
-            hand-over, kept camera) if the hand turned at least this much over its samples
-            (``rotation_spread``): while the hand only translates, any point fits.
-        reacquire_radius: m, how near the adopted estimate's prediction a body feature must be to
-            take over the observation of a lost observed feature.
-        joint: when a leader is chosen (the paper's verdict on its own point), refine its camera
-            jointly with every other candidate that it explains (``_joint_refined``; beyond the
-            paper, which uses one point): a mark on one face of the tool is tracked over a few
-            tenths of a radian of hand rotation only, and the points together saw more.
-        joint_min_samples: samples a candidate needs to join the joint refinement.
-        joint_consistency: a candidate joins the joint refinement when its RMS error (with its best
-            ``p_HP``) is within this many times the leader's, under the leader's camera and then the
-            joint one. A point tracked with an error of its own (seen: 2.2 times the leader's, its
-            own camera 37 mm off) turns the joint camera by 0.1 deg at 3 and is left out at 2, where
-            the rod's points with the leader lie within 1.0-1.4 times.
-        joint_weighted: in the joint refinement, each point's samples are weighted by the inverse
-            of its own mean squared error under the joint camera (with its best ``p_HP``; weighted
-            least squares, the maximum-likelihood camera when each point has its own noise),
-            found again under each camera (False: every sample counts the same). A track whose
-            errors are larger than the others' (seed 13: 1.1 mm RMS under the true camera, the
-            others 0.55-0.75 mm) then turns the camera less (1.50 -> 0.71 mm at its first adoption).
-        max_archived: candidates kept after their track ended (their statistic is still a valid
-            constraint on the camera) for the joint refinement, the most samples first.
-        max_observers: consistent points observed besides the observed point and its witness
-            (``_observe``; 0: the observed point and witness only).
-        blind_min_samples: > 0: on a frame with no observed point, candidates with at least this
-            many samples are asked whether the adopted camera explains them (``_blind_evidence``;
-            0: no sample on such a frame, the paper's).
-        observe_radius: m; a witness, an observer or a hand-over must lie within this of the
-            adopted tool point in H (on the tool: a point of the gripper does not move when the
-            tool slips; inf: anywhere on the hand).
-        refine_interval: s; > 0: while observing, every tracked candidate whose sample the
-            adopted model explains (its own ``p_HP``, within the allowable error) keeps being fed,
-            and every ``refine_interval`` s the adopted camera is refined jointly with them
-            (``_joint_refined``) and offered as a refinement (``refined_solution``, counter
-            ``refinement``; a state machine with ``adopt_refinements`` adopts it). The model then
-            keeps learning from the poses the arm reaches after the first identification
-            (0: the paper's fixed model).
-        stitch_radius: m; > 0: in the joint refinement, candidates whose best ``p_HP`` under the
-            current camera lie within this of each other are tracks of the same physical point
-            (a mark tracked again after its track ended, at other hand orientations) and are
-            one point: their statistics are summed (``stitch``), so that the point's ``p_HP`` and
-            the camera are constrained by the rotation of all of them (0: one point per track).
-        pose_tolerance: s, how far the nearest hand pose may be from a frame's capture time.
-        verified_overlap: > 0: a candidate can witness, observe or take over the observation only
-            with at least this many samples taken while the adopted model was *verified* (at the
-            adoption, and on every frame where a tool point observed within the allowable error):
-            its ``p_HP``, learned under the adopted camera, is then tied to the tool as the model
-            knows it. A point first tracked while the observation was blind fits the adopted camera
-            with its own ``p_HP`` whether or not the tool moved in the gap (a slipped tool leaves
-            the camera in place), so handing the observation over to it would re-learn the tool
-            point unchecked and hide the slip (0: any candidate with ``observe_min_samples``).
-        keep_allowable_error: a model adopted with the previous camera (``keep_camera``) reports
-            as its expected error (which sets the allowable error) at most the expected error of
-            the identification that found that camera: only ``p_HP`` is new (3 unknowns, the
-            camera kept), and a candidate the kept camera explains less well (up to
-            ``observe_consistency`` times the RMS) would otherwise widen the allowable error by up
-            to ``observe_consistency^2`` and hide a later slip of that size (False: the
-            candidate's own mean squared error under the kept camera).
-        unverified_evidence: on a frame with no observed point, a tool candidate that qualifies
-            to observe in every way but ``verified_overlap`` (the adopted camera explains it with
-            its own ``p_HP``: the tool is in view, but none of its points the model verified) is a
-            sample over the allowable error (``s_t`` = inf): the tool point the model holds can no
-            longer be checked, as after a slip that ended every observed track; the paper's
-            consecutive-violation count then decides (False: such frames give no sample).
-        free_space_radius: m; > 0: every frame, the adopted tool point is also checked against the
-            depth image (``step``'s ``depth_gap``, e.g. ``perception.free_space.depth_gap`` with
-            this radius): where the model puts it, the camera must not see a surface behind it.
-            ``s_t = max(gap, 0)^2`` (a lower bound of the point's error along the ray) joins the
-            frame's sample (the larger one), or is the frame's sample when no point observes.
-            Beyond the paper: a slip ends the observed point's track in the slip itself, and the
-            points tracked after it fit the kept camera with their own ``p_HP``, so no tracked
-            point shows the slip; the depth still shows that the tool left the place the model
-            puts it (0: off; the system needs the depth image).
-        keep_tool_points: after a reset that cleared the model (the state machine does so when the
-            camera moved), the points the abandoned model held (``_model_points``: the observed
-            point, its witness, the observers and every candidate, tracked or archived, its camera
-            explains, each with its ``p_HP``) keep their ``p_HP``: a moved camera leaves the held
-            tool as it was. Their tracks that outlive the move give, once each has
-            ``observe_min_samples`` samples, the new camera in closed form
-            (``camera_given_points``: 6 unknowns, not 15); it leads when they fit it within
-            ``observe_consistency`` of the adopted RMS error (the worst misfit left out until they
-            do, while more than half remain) and their camera-frame points spread at least
-            ``min_point_spread`` off a line. Beyond the paper, which identifies everything again
-            (False: the paper's).
-        turn_radius, turn_max_shift, turn_min_samples: ``keep_tool_points`` with the static
-            scene's turn across the move (``step``'s ``scene_turn``): the camera's rotation comes
-            from the scene and its position from the known points' samples since the move
-            (``camera_after_turn``), as soon as they have ``turn_min_samples`` samples each: no
-            spread needed. A point tracked through the move is known by its id; a new track (the
-            turn ended the old one), if the hand turned ``min_rotation_spread`` over its samples,
-            is the known point nearest its best ``p_HP`` under the turned camera at the old
-            position, less the offset that the camera's shift (unknown, up to ``turn_max_shift``,
-            m) gives every track alike, within ``turn_radius`` (m; the only mark within twice that,
-            known points within ``turn_radius`` of each other being tracks of one mark: the rod's
-            marks lie 15-20 mm apart). The offset is the tracked-through points' own, or
-            the one that most new tracks (at least two) agree on (``_common_offset``); matched so,
-            their known points must lie more than ``turn_radius`` (RMS) off a line, as along a row
-            of marks an offset of one spacing maps tracks of marks never known onto known ones. The
-            points must fit the camera within ``observe_consistency`` of the adopted RMS error, as
-            above.
-        turn_scene_shift: m; when the scene's depth on both sides of the move gives the camera's
-            shift too (``camera_after_turn`` without tool samples), new tracks are matched under
-            the camera at that position, the common offset searched within this of it (not
-            ``turn_max_shift`` of the old one: an offset as long as the marks' spacing maps tracks
-            of unknown marks onto their known neighbours) and one new track suffices.
-        turn_admit_known: with the turn, also admit (before body features) tracks whose point lies
-            within the window of the camera's position (``turn_scene_shift`` or ``turn_max_shift``)
-            plus ``turn_radius`` of where the turned camera sees a known point
-            (``_near_known_points``), body or not: after the move the detector's body cells hold
-            the static scene (False: body features only; seed 5's head move was re-found 15.3 s
-            after its detection, 10.7 s of it without a candidate).
-        min_point_spread: m, how far the known points' samples must lie from a line in the camera
-            frame (their RMS distance from their principal line, ``keep_tool_points``): an error e
-            of a kept ``p_HP`` (learned under the previous camera) turns the new camera by about e
-            over the spread (the noise alone: the noise over the spread and the root of the number
-            of samples). At 3 cm the hand-eye runs had 0.11-0.26 degree; 6 cm halves that, and
-            when the spread takes longer the full identification comes first.
-        min_view_change: m; > 0: a candidate takes a sample only when its point moved at least
-            this far in the camera frame since its last sample (``_new_view``; 0: every frame, the
-            paper's). A point's measurement errors repeat with its view, so Eq. (1)'s sum over
-            frames weighs each view by how long the arm held it (the detector's confirming trials
-            and the pause after a convergence hold it for seconds) and the camera leans towards
-            the held views. The counts of samples that fit a camera (the criteria's
-            ``min_samples``, ``joint_min_samples``, and ``observe_min_samples`` and
-            ``turn_min_samples`` for the camera re-found from kept tool points) then count views;
-            the observation's (``observe_min_samples`` for a point that confirms, witnesses or
-            observes, ``keep_camera_min_samples``, ``blind_min_samples``, ``verified_overlap``)
-            count the frames a point was tracked, as without it: they ask how long a point has been
-            followed, and a point waiting for views must not stop observing (seed 1's slip was
-            seen 2.9 s late when they counted views; with frames for the camera re-found after the
-            head move, seed 5's was 33 mm off).
-        min_rotation_lever: m; > 0: a converged leader is adopted only when its points' views pin
-            the camera's rotation: the smallest of their ``eye_to_hand.rotation_levers`` (with the
-            joint refinement's points) at least this (0: no such test, the paper's rule).
-            Otherwise it waits for more of the motion (``CandidateBank.more_motion``) as long as its
-            point is seen: once its track ends or it has had no refined point for 0.3 s, it is
-            adopted with the lever it has.
-        min_adopt_rotation_spread: rad; > 0: the same wait (held back, more motion asked for, adopted
-            as it is once its point is not seen) until the hand turned at least this much over the
-            leader's samples (``rotation_spread``): the camera's rotation is seen only through the
-            hand's turning (0: no such test). On ten runs of ``hand_eye.yaml`` the hand had turned
-            0.095-0.122 rad at the first adoption, on seed 10 0.068 rad, whose camera was the worst
-            (0.097 deg, 2.04 mm); 0.09 put it at 0.72 mm, but held seed 16 (0.081 rad, 0.45 mm
-            without the wait) 7.9 s longer, so it is off there (README).
-        motion_min_samples: > 0: until the first identification, more motion is asked for
-            (``CandidateBank.more_motion``) once a candidate has this many samples: the detector's
-            confirming trials, which hold the arm near one posture, have found a point to identify,
-            and the camera's rotation is pinned only as the hand moves (0: not for this). Not after
-            a change, where the kept camera and the scene's turn re-find the model from the far
-            postures they were built with (asked after changes too, the eight runs of
-            ``hand_eye.yaml`` gave the same misses: the head move not re-found within 15 s on seeds
-            1 and 5, before ``turn_scene_shift``).
+    ``p_HP`` is a candidate's tracked point in the hand frame H. A candidate *fits* a camera when
+    its samples, under that camera and its own best ``p_HP``, have an RMS error at most
+    ``observe_consistency`` times the adopted model's. Counts are samples (frames a point is tracked;
+    with ``min_view_change``, those that fit a camera count views); a 0, False or inf turns off a
+    rule that goes beyond the paper.
     """
 
-    max_candidates: int = 8
+    max_candidates: int = 8  # count: identifiers run at a time, one per candidate tracked point
+    # m: farthest a tracked point on the hand or its tool lies from the hand origin (motion gate)
     max_hand_radius: float = 0.6
-    gate_margin: float = 0.01
-    max_lost_time: float = 2.0
+    gate_margin: float = 0.01  # m added to the motion gate's bound: the depth noise of two frames
+    max_lost_time: float = 2.0  # s without a sample before a candidate's slot is freed
+    # s after admission before a candidate that has not converged is rejected (until a reset)
     max_unconverged_time: float = 30.0
+    # m: a body feature this near the adopted prediction takes over a lost observed feature
     reacquire_radius: float = 0.01
+    # s: the most the nearest hand pose's time may differ from a frame's capture time
     pose_tolerance: float = 0.01
+    # m: a candidate with min_samples whose expected RMS error exceeds this is rejected (not on the hand)
     reject_rms: float = 0.02
+    # also admit features in body cells, after body features (the fit rejects the background among them)
     use_body_cells: bool = True
+    # m over the motion gate: an observed point jumping more in a frame is a lost track (re-acquired)
     observation_jump: float = 0.15
+    # count: samples a candidate needs to take over a lost observation, witness or observe
     observe_min_samples: int = 100
+    # ratio: a candidate fits a camera when its RMS error is within this times the adopted one's
     observe_consistency: float = 3.0
+    # count: samples the observed point alone violates the allowable error before its witness replaces it
     primary_failures: int = 10
+    # after a reset, a candidate that fits the old camera leads at once with it (a slip moves only p_HP)
     keep_camera: bool = True
+    # count: samples to lead with the kept camera when the static scene stayed still since
+    # before the reset (else observe_min_samples); only p_HP (3 unknowns) is new then
     keep_camera_min_samples: int = 100
+    # a converged candidate leads only if another one fits its camera (one track can fit a wrong camera)
     confirm_with_witness: bool = True
+    # rad the hand turns over a candidate's samples before it can fit a camera (a translation fits any)
     min_rotation_spread: float = 0.15
+    # refine the leader's camera jointly with all candidates that fit it (the paper uses one point)
     joint: bool = False
-    joint_min_samples: int = 30
+    joint_min_samples: int = 30  # count: samples a candidate needs to join the joint refinement
+    # ratio: a candidate joins the joint refinement if its RMS error is within this times the leader's
     joint_consistency: float = 3.0
+    # weight each point's samples by its inverse mean squared error (maximum likelihood); False: equal
     joint_weighted: bool = False
+    # count: ended tracks kept for the joint refinement (still valid constraints), most samples first
     max_archived: int = 16
-    max_observers: int = 0
+    max_observers: int = 0  # count: fitting points observed besides the observed point and its witness
+    # s between joint refinements of the adopted camera while observing; 0: the paper's fixed model
     refine_interval: float = 0.0
+    # m: a witness, observer or hand-over lies within this of the adopted tool point in H (on the
+    # tool: a gripper point does not move when the tool slips); inf: anywhere on the hand
     observe_radius: float = math.inf
+    # count: samples a candidate needs to be checked on frames with no observed point; 0: off, the paper's
     blind_min_samples: int = 0
+    # m: joint-refinement tracks whose p_HP lie this close are one point (summed); 0: one point per track
     stitch_radius: float = 0.0
+    # count: samples, taken while the adopted model is verified, that a candidate needs to witness,
+    # observe or take over: a point learned blind would re-learn the tool point and hide a slip; 0: off
     verified_overlap: int = 0
+    # on a blind frame, a tool candidate that fits but lacks verified_overlap is a sample over the
+    # allowable error: the held tool point can no longer be checked; False: no sample
     unverified_evidence: bool = False
+    # a kept-camera model's expected error is capped at that of the identification that found
+    # the camera, so a worse fit does not widen the allowable error; False: its own error
     keep_allowable_error: bool = False
+    # m: radius of the depth check of the adopted tool point (the camera must see no surface behind
+    # it; the gap squared joins the frame's sample): a slip shows even with no point tracked; 0: off
     free_space_radius: float = 0.0
+    # after a camera-move reset, the abandoned model's points keep their p_HP (a moved camera leaves
+    # the held tool unchanged) and give the new camera in closed form (6 unknowns, not 15)
     keep_tool_points: bool = False
+    # m: RMS distance from a line the known points' camera-frame samples need (keep_tool_points):
+    # a p_HP error e turns the new camera by about e over this spread
     min_point_spread: float = 0.06
+    # m: after the scene's turn, a new track matches the known point within this of its p_HP; the
+    # rod's marks lie 15-20 mm apart, so only one mark lies within twice this
     turn_radius: float = 0.004
+    # m: largest camera shift searched when matching new tracks to known points after a turn
     turn_max_shift: float = 0.03
+    # count: samples each known point needs before the camera after a turn is solved
     turn_min_samples: int = 15
+    # m: window around the scene's camera shift where the common offset is sought (below a mark spacing)
     turn_scene_shift: float = 0.01
+    # after a turn, also admit tracks near where the turned camera sees a known point, body or not:
+    # after a camera move the detector's body cells hold the static scene
     turn_admit_known: bool = False
+    # m a point must move in the camera frame before its next sample; 0: every frame, the paper's.
+    # Measurement errors repeat with the view, so held views would otherwise outweigh the others
     min_view_change: float = 0.0
+    # m: least rotation lever of a converged leader's points before adoption (it waits for motion); 0: off
     min_rotation_lever: float = 0.0
+    # rad the hand must turn over a converged leader's samples for adoption (the camera's
+    # rotation shows only as the hand turns); it waits for motion while its point is seen; 0: off
     min_adopt_rotation_spread: float = 0.0
+    # count: samples of a candidate after which more motion is asked for until the first
+    # identification: the rotation is pinned only as the hand moves; 0: off
     motion_min_samples: int = 0
 
     def __post_init__(self):
@@ -508,12 +376,17 @@ def step(
     depth_gap: Callable[[np.ndarray], float] | None = None,
     scene_turn=None,
     scene_still_since: float = math.inf,
+    reset_reason: int = NO_RESET,
 ) -> CandidateBank:
     """One tick at ``time``: the reset, the hand pose, then (on a new frame) admission, feeding,
     loss, the leader and the observation. Returns the new bank.
 
     Args:
         reset: the reset input; a value different from the last one seen drops every candidate.
+        reset_reason: why that reset (``coordination.OBSERVATION_FAILED`` or ``CAMERA_MOVED``;
+            ``NO_RESET`` when not known): after a camera move the model's camera is dropped and,
+            with ``keep_tool_points``, its tool points are kept; after any other reset the model
+            (``reference_x``) is kept as the previous camera that a slipped tool leaves in place.
         X_WH: the hand pose now (4 x 4).
         frame_time: the capture time of the features below (s).
         ids, p_CP, valid, on_body: per tracked feature (same order): id, point in the camera frame
@@ -522,7 +395,7 @@ def step(
             candidates).
         allowable_error: the state machine's sigma (m^2), to tell a tracking failure of the
             observed point from a change of the body (inf: never).
-        reference_x: the adopted estimate (Eq. (36)); zeros or None before one. ``s_t`` of the
+        reference_x: the adopted estimate (Eq. (36)); zeros or None while there is none. ``s_t`` of the
             observed feature is computed under it (under the leader's own estimate if unset).
         depth_gap: this frame's depth check (``free_space_radius``): for a point in the camera
             frame, how far behind it the camera sees a surface, m (NaN: cannot tell). None: no
@@ -537,12 +410,13 @@ def step(
             camera did not move and the kept camera leads with ``keep_camera_min_samples``.
     """
     if reset != bank.last_reset:
-        previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) else None
+        camera_moved = reset_reason == CAMERA_MOVED
+        previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) and not camera_moved else None
         known = () if previous is not None else bank.known_points
         # The camera before a move whose turn has not come yet: the resets that follow while the
         # camera still moves (no leader in between) keep it; one after the turn is a new change.
         moved_from, moved_at = (bank.moved_from_x, bank.moved_at) if bank.turn is None else (None, math.nan)
-        if previous is None and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
+        if camera_moved and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
             known = _model_points(bank, params)  # the model cleared: the camera moved, the tool did not
             moved_from, moved_at = bank.model_x, float(time)
         elif previous is not None or bank.leader >= 0:

@@ -84,8 +84,15 @@ class CoordinationRule:
 
 # Layout of the state vector.
 (MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE,
- REFINEMENT, CAMERA_MOVES, CAMERA_MOVING) = range(12)
-STATE_SIZE = 12
+ REFINEMENT, CAMERA_MOVES, CAMERA_MOVING, RESET_REASON) = range(13)
+STATE_SIZE = 13
+
+# Why the identifier was last reset (the state's RESET_REASON; the state machine's reset_reason port).
+NO_RESET = 0  # not reset yet
+OBSERVATION_FAILED = 1  # samples over the allowable error (the paper's rule): the body changed (a slip)
+CAMERA_MOVED = 2  # the camera noticed its own motion: the camera's model is stale, the body's is not
+RESET_REASON_NAMES = {NO_RESET: "none", OBSERVATION_FAILED: "observation failed",
+                      CAMERA_MOVED: "camera moved"}
 
 
 def allowable_error(rule: CoordinationRule, expected_mse: float) -> float:
@@ -153,7 +160,8 @@ def step(
         new[CAMERA_MOVES] = camera_moves
         if camera_moves > state[CAMERA_MOVES]:
             new[CAMERA_MOVING] = 1.0
-            return _detect_change(new, sample_count), Event(time, CHANGE_DETECTED, CAMERA_MOVED_DETAIL)
+            event = Event(time, CHANGE_DETECTED, CAMERA_MOVED_DETAIL)
+            return _detect_change(new, sample_count, CAMERA_MOVED), event
         if state[CAMERA_MOVING]:
             if camera_moving:  # keep the identifier reset: these samples fit no camera
                 new[RESET_COUNT] += 1
@@ -184,14 +192,15 @@ def step(
     else:
         new[VIOLATIONS] = 0
     if new[VIOLATIONS] >= rule.max_consecutive_violations:
-        return _detect_change(new, sample_count), Event(
+        return _detect_change(new, sample_count, OBSERVATION_FAILED), Event(
             time, CHANGE_DETECTED, f"{rule.max_consecutive_violations} samples over the limit")
     return new, None
 
 
-def _detect_change(new: np.ndarray, sample_count: int) -> np.ndarray:
-    """A change detection (in place on ``new``): back to IDENTIFY, the identifier reset (its
-    solutions with more samples than arrive from now on are stale)."""
+def _detect_change(new: np.ndarray, sample_count: int, reason: int) -> np.ndarray:
+    """A change detection (in place on ``new``) for ``reason``: back to IDENTIFY, the identifier
+    reset (its solutions with more samples than arrive from now on are stale)."""
+    new[RESET_REASON] = reason
     new[MODE] = IDENTIFY
     new[VIOLATIONS] = 0
     new[RESET_COUNT] += 1

@@ -73,7 +73,7 @@ The anchors' tracks through the move are used as they are (re-registering the vi
 the image after moved them by 0.07 px median in ``diagrams/hand_eye.yaml``'s head turn).
 """
 
-from __future__ import annotations
+# No "from __future__ import annotations": yaml_load_typed reads CameraMotionParams' real field types.
 
 import math
 from dataclasses import dataclass, field, replace
@@ -88,23 +88,23 @@ from sustain_drake.perception.optical_flow import PinholeIntrinsics, pinhole_poi
 VIEW_FRAMES = 30
 
 
-@dataclass(frozen=True)
+@dataclass
 class CameraMotionParams:
     """Thresholds of the camera-motion detector (px, frames, counts)."""
 
-    min_background: int = 20          # anchors needed to judge a frame
+    min_background: int = 20          # count: anchors needed to judge a frame
     anchor_time: float = 0.5          # s a feature must have been still against the scene to be an anchor
-    inlier_px: float = 1.0            # RANSAC: a feature within this of the fitted motion is an inlier
-    min_inlier_fraction: float = 0.6  # of the background: the consensus that is "the scene"
-    still_px: float = 0.5             # per-frame displacement at or below this: not moving
-    feature_still_px: float = 0.5     # a feature this far (px) from where it became still: it moved
+    inlier_px: float = 1.0            # px: RANSAC: a feature within this of the fitted motion is an inlier
+    min_inlier_fraction: float = 0.6  # fraction of the background: the consensus that is "the scene"
+    still_px: float = 0.5             # px: per-frame displacement at or below this is not moving
+    feature_still_px: float = 0.5     # px: a feature this far from where it became still has moved
     arm_speed: float = 0.01           # rad/s: a joint faster than this moves the arm (Eq. (27)'s threshold)
-    rest_frames: int = 3              # consecutive frames not moving that end an episode
-    min_frames: int = 2               # moving frames of an episode before it can be a camera move
-    move_px: float = 3.0              # composed displacement of an episode that is a camera move
-    exclude_static: bool = True       # static scene features are no body candidates (``static_features``)
-    view_still_px: float = 0.1        # a frame moving at most this adds to the view of the still scene
-    turn_frames: int = 5              # still frames before and after a move that give its turn (0: none)
+    rest_frames: int = 3              # count: consecutive frames not moving that end an episode
+    min_frames: int = 2               # count: moving frames of an episode before it can be a camera move
+    move_px: float = 3.0              # px: composed displacement of an episode that is a camera move
+    exclude_static: bool = True       # static scene features are no body candidates (static_features)
+    view_still_px: float = 0.1        # px: a frame moving at most this adds to the view of the still scene
+    turn_frames: int = 5              # count: still frames around a move that give its turn; 0: none
 
     def __post_init__(self):
         times = (self.anchor_time, self.arm_speed, self.feature_still_px)

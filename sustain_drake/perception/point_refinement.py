@@ -29,7 +29,7 @@ The tracker (``optical_flow``) is untouched: its tracks keep their own pixels; a
 needs fixed points (the candidate identifiers) refines the features it uses.
 """
 
-from __future__ import annotations
+# No "from __future__ import annotations": yaml_load_typed reads RefinementParams' real field types.
 
 from dataclasses import dataclass
 
@@ -39,47 +39,31 @@ import numpy as np
 from sustain_drake.perception.optical_flow import PinholeIntrinsics, pinhole_points, sample_patches, to_gray
 
 
-@dataclass(frozen=True)
+@dataclass
 class RefinementParams:
-    """Attributes:
-    corner_window_px: half side of ``cornerSubPix``'s search window (px); 0 keeps the tracked pixel.
-    max_shift_px: a refined pixel farther than this from the tracked one is not a corner of this
-        track (no point).
-    depth_window_px: half side of the depth median window (px); 0 takes the one nearest pixel.
-    surface_tolerance: m; window pixels within this of the median are on the same surface.
-    min_fraction: of the window's pixels that must be on that surface.
-    depth_plane: the depth where the refined pixel's ray meets the plane fitted to the window's
-        same-surface pixels (``plane_depth``); False: the window's median.
-    blob_window_px: > 0: a feature on a bright mark smaller than the window (a yellow checker
-        cell of the rod is 6-7 x 7-9 px at 0.7-0.8 m: the tracker's Shi-Tomasi block of 7 px
-        finds its centre, not its corners) is moved to the mark's intensity centroid
-        (``blob_centres``, half side of the window in px) when the mark lies wholly inside the
-        window; otherwise (a corner, an edge) ``cornerSubPix``'s pixel is kept. 0: off.
-    symmetry_window_px: > 0: a refined pixel is a point only if the image is centrally symmetric
-        about it (``central_symmetry`` over the ``(2 k + 1)^2`` window, at least ``min_symmetry``): a
-        checker saddle or the centre of a small mark, whose image stays centrally symmetric about
-        the projected point under any view (locally, a view is affine, and an affine map keeps
-        central symmetry), so the sub-pixel point does not move on the tool as the view changes. An
-        L corner of a cell against the margin is not symmetric, and ``cornerSubPix`` puts it inside
-        the blurred corner by an amount that depends on the projected angle: an error of a
-        millimetre that follows the view (``bench/bench_hand_eye_error_budget.py``). 0: off.
-    min_symmetry: the least normalised correlation of the window with itself turned by 180 deg
-        (1 for a perfectly symmetric window, -1 for a straight edge).
-    max_incidence_deg: with ``depth_plane``, a point whose fitted face is seen more obliquely than
-        this (the angle between its ray and the face's normal) is not valid: a pixel's error along
-        the face is ``tan`` of it times as large along the ray (``bench_hand_eye_candidates.py``:
-        along-ray RMS 1.1-1.9 mm at 30-45 deg, 3.3-4.9 mm at 45-60 deg on the rod). 90: off.
-    """
+    """Sub-pixel corners and robust depth for the tracked features an identifier uses (see the
+    module docstring); each step beyond ``cornerSubPix`` and the median depth is off by default."""
 
-    corner_window_px: int = 2
+    corner_window_px: int = 2  # px: half side of cornerSubPix's search window; 0 keeps the tracked pixel
+    # px: a refined pixel farther than this from the tracked one is no corner of the track (no point)
     max_shift_px: float = 2.0
-    depth_window_px: int = 2
+    depth_window_px: int = 2  # px: half side of the depth median window; 0 takes the one nearest pixel
+    # m: window pixels within this of the median depth are on the same surface
     surface_tolerance: float = 0.008
-    min_fraction: float = 0.7
+    min_fraction: float = 0.7  # fraction of the window's pixels that must be on that surface (else no point)
+    # take the depth where the refined pixel's ray meets the plane fitted to the same-surface pixels
+    # (plane_depth): on an oblique face the median is off by half a pixel's depth gradient; False: median
     depth_plane: bool = False
+    # px: half side of a window; a feature on a bright mark wholly inside it moves to the mark's
+    # intensity centroid (blob_centres): a rod cell is smaller than the tracker's 7 px block; 0: off
     blob_window_px: int = 0
+    # deg: with depth_plane, a point whose face is seen more obliquely than this is invalid (a
+    # pixel's error along the face is tan(angle) times as large along the ray); 90: off
     max_incidence_deg: float = 90.0
+    # px: half side k of the (2 k + 1)^2 window about which the image must be centrally symmetric
+    # (min_symmetry): a saddle or mark centre stays on the same tool point under any view; 0: off
     symmetry_window_px: int = 0
+    # least correlation of the window with itself turned 180 deg (1: symmetric, -1: a straight edge)
     min_symmetry: float = 0.5
 
     def __post_init__(self):
@@ -285,11 +269,12 @@ def incidence(coef: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics)
 
 
 def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
-                  params: RefinementParams = RefinementParams(), return_pixels: bool = False):
+                  params: RefinementParams | None = None, return_pixels: bool = False):
     """``(p_CP, valid)`` (K x 3 in m, K) for tracked pixels ``p_px``: the sub-pixel corner near each
     and the robust depth there, back-projected with the pinhole model (and the refined pixels,
     K x 2, third, if ``return_pixels``). A point without a corner nearby or without a clean depth
     is not valid (a zero row, never NaN; its pixel is the tracked one)."""
+    params = RefinementParams() if params is None else params
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
     if p.shape[0] == 0 or np.size(image) == 0 or np.size(depth) == 0:
         out = np.zeros((p.shape[0], 3)), np.zeros(p.shape[0], bool)

@@ -1,12 +1,18 @@
 """Scenario files -> Diagrams: the simulated world of the paper's experiments.
 
-``load_scenario(path)`` reads a scenario YAML file (``diagrams/*.yaml``) into a ``Scenario``;
-``build_station(scenario)`` returns the Diagram with the exported ports listed in the README.
+``load_scenario(path, name)`` reads a scenario YAML file (``diagrams/*.yaml``) into a ``Scenario``;
+``build_station(scenario)`` returns the Diagram with the exported ports listed in docs/simulation.md.
 """
 
-from sustain_drake.station.build import EXPORTED_OUTPUTS, build_station, camera_info
+from sustain_drake.station.build import (
+    EXPORTED_OUTPUTS,
+    build_station,
+    camera_info,
+    held_shape,
+    sensor_pose_in_hand,
+)
 from sustain_drake.station.models import models_dir
 from sustain_drake.station.scenario import Scenario, ScenarioError, load_scenario
 
 __all__ = ["EXPORTED_OUTPUTS", "Scenario", "ScenarioError", "build_station", "camera_info",
-           "load_scenario", "models_dir"]
+           "held_shape", "load_scenario", "models_dir", "sensor_pose_in_hand"]

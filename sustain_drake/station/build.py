@@ -155,6 +155,27 @@ class _World:
         return self.plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame()
 
 
+def held_shape(station):
+    """The held tool's collision shape (a ``pydrake.geometry`` shape) and its pose ``X_KG`` in the
+    sensor frame K at the nominal grasp, from the station's plant and SceneGraph."""
+    plant = station.GetSubsystemByName("plant")
+    inspector = station.GetSubsystemByName("scene_graph").model_inspector()
+    tool = plant.GetBodyByName("tool")
+    geometries = plant.GetCollisionGeometriesForBody(tool)
+    if len(geometries) != 1:
+        raise ValueError(f"the held tool needs exactly one collision geometry, it has {len(geometries)}")
+    context = plant.CreateDefaultContext()
+    X_WK = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName(HAND_BODY)) @ sensor_pose_in_hand(station)
+    X_KG = X_WK.inverse() @ plant.EvalBodyPoseInWorld(context, tool) @ inspector.GetPoseInFrame(geometries[0])
+    return inspector.GetShape(geometries[0]), RigidTransform(X_KG)
+
+
+def sensor_pose_in_hand(station) -> RigidTransform:
+    """``X_HK``: the wrist sensor's frame K (the weld's child frame) in the hand frame H."""
+    plant = station.GetSubsystemByName("plant")
+    return plant.GetJointByName(SENSOR_JOINT).frame_on_child().GetFixedPoseInBodyFrame()
+
+
 def camera_info(scenario: Scenario) -> CameraInfo:
     """The intrinsics of the scenario's camera (image size, focal lengths, principal point),
     e.g. for the optical-flow tracker's constructor."""
@@ -172,7 +193,7 @@ def _deterministic(transform, name: str) -> RigidTransform:
 def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram:
     """Builds the world of ``scenario`` as a Diagram named ``station``.
 
-    Exported outputs: see ``EXPORTED_OUTPUTS`` and the README's Simulation section (the
+    Exported outputs: see ``EXPORTED_OUTPUTS`` and docs/simulation.md (the
     camera ports exist only when the scenario's camera renders them). Exported inputs:
     ``motion_pause`` and ``motion_confirm`` (the MotionGenerator's requests). With a
     ``meshcat``, the scene is also drawn there (illustration geometry). A scenario the world

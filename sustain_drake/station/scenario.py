@@ -8,21 +8,24 @@ file only lists what differs; a key that is not in the schema is an error that n
 """
 
 
+import copy
 import dataclasses
 import math
 import re
 from dataclasses import field
 from pathlib import Path
 
+import numpy as np
+import yaml
 from pydrake.common.schema import Transform
-from pydrake.common.yaml import yaml_load_typed
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
 
-from sustain_drake.experiments.body_detection_config import BodyDetectionConfig
-from sustain_drake.experiments.hand_eye_config import HandEyeConfig
-from sustain_drake.experiments.kinesthetic_config import KinestheticConfig
+from sustain_drake.loops.body_detection import BodyDetectionConfig
+from sustain_drake.loops.hand_eye import HandEyeConfig
+from sustain_drake.loops.payload import KinestheticConfig
 
 ARM_JOINTS = ("arm_joint1", "arm_joint2", "arm_joint3", "arm_joint4", "arm_joint5")
 HEAD_JOINTS = ("head_pan", "head_tilt")
@@ -58,50 +61,47 @@ def _default_camera() -> CameraConfig:
 class HeadConfig:
     """The pan-tilt head: where its post stands and its initial joint angles."""
 
-    # Pose of the post's foot in the world; its +x is the head's forward direction. The
-    # default puts the head 1.4 m in front of the arm, looking back at it.
+    # pose of the post's foot in the world (+x forward): 1.4 m in front of the arm, looking back at it
     X_WP: Transform = field(default_factory=lambda: Transform(
         RigidTransform(RollPitchYaw(0.0, 0.0, math.pi), [1.4, 0.0, 0.0])))
-    pan: float = 0.0
-    tilt: float = 0.1
+    pan: float = 0.0  # rad: initial pan angle
+    tilt: float = 0.1  # rad: initial tilt angle (positive looks down, towards the arm)
 
 
 @dataclasses.dataclass
 class ToolConfig:
     """Which tool is held and its pose in the gripper's grasp frame G."""
 
-    model: str = "rod"  # "rod" (0.3 m, 0.1 kg), "box" (0.6 kg) or "none"
-    # Pose of the tool frame T in the grasp frame G (between the fingers, z along approach).
+    model: str = "rod"  # the held tool: "rod" (0.3 m, 0.1 kg), "box" (0.6 kg) or "none"
+    # pose of the tool frame T in the grasp frame G (between the fingers, z along the approach)
     X_GT: Transform = field(default_factory=Transform)
-    # Initial slip state (see ToolSlip): translation along G's z and rotation about G's x.
-    slide: float = 0.0
-    pivot: float = 0.0
-    # The gripper finger's closed position on this tool (m, 0 = open).
-    gripper_position: float = 0.0225
+    slide: float = 0.0  # m: initial slip along G's z (see ToolSlip)
+    pivot: float = 0.0  # rad: initial slip about G's x (see ToolSlip)
+    gripper_position: float = 0.0225  # m: the finger's closed position on this tool (0: open)
 
 
 @dataclasses.dataclass
 class MotionConfig:
     """The babbling motion generator (smooth random joint-space moves within ranges)."""
 
-    seed: int = 0
-    # Per arm joint [lower, upper] in rad; clipped to the joint limits of the model.
+    seed: int = 0  # seed of the random moves
+    # rad: [lower, upper] per arm joint, clipped to the model's joint limits
     joint_ranges: list[list[float]] = field(default_factory=lambda: [
         [-0.8, 0.8], [0.2, 1.0], [0.6, 1.6], [-0.4, 1.2], [-1.5, 1.5]])
+    # rad: the arm's joint angles at the start
     initial_posture: list[float] = field(default_factory=lambda: [0.0, 0.6, 1.1, 0.5, 0.0])
-    max_speed: float = 0.6  # rad/s, the peak joint speed of a move (the pace)
-    min_duration: float = 1.0  # s, the shortest move
+    max_speed: float = 0.6  # rad/s: peak joint speed of a move (the pace)
+    min_duration: float = 1.0  # s: the shortest move
     dwell: float = 0.0  # s of rest after each move (quasi-static identification)
     confirm_hold: float = 0.5  # s of rest at a confirm posture before moving again
-    # Quick confirming trials (MotionGenerator): a confirm request within confirm_near rad of
-    # the current posture is answered in place, and the move again is a step of confirm_step
-    # rad per joint; 0: go back to the posture, then a usual move.
+    # rad per joint: a quick confirming trial in place (MotionGenerator) moves again by this step;
+    # 0: go back to the posture, then a usual move
     confirm_step: float = 0.0
+    # rad: a confirm request within this of the current posture is answered in place; 0: never
     confirm_near: float = 0.0
     period: float = 0.01  # s between the generator's updates
-    # The arm's controller adds the gravity torques of its own links (a model of the arm alone:
-    # not the held tool, which the robot does not know) to the joints' PD, as a real arm
-    # controller does; off, the arm sags ~0.4 deg under gravity until the PD balances it.
+    # add the gravity torques of the arm's own links (not the held tool's, which the robot does
+    # not know) to the joints' PD, as a real arm controller does; off, the arm sags ~0.4 deg
     gravity_compensation: bool = False
 
 
@@ -109,82 +109,79 @@ class MotionConfig:
 class WrenchSensorConfig:
     """The wrist force/torque sensor; noise like an ATI Mini40."""
 
-    rate: float = 100.0  # Hz, sample rate of the reading
-    force_noise: float = 0.02  # N, standard deviation per axis
-    torque_noise: float = 0.0005  # N m, standard deviation per axis
-    # Constant offset added to the reading, [tau_x, tau_y, tau_z, f_x, f_y, f_z] (N m, N).
+    rate: float = 100.0  # Hz: sample rate of the reading
+    force_noise: float = 0.02  # N: standard deviation per axis
+    torque_noise: float = 0.0005  # N m: standard deviation per axis
+    # N m, N: constant offset added to the reading, [tau_x, tau_y, tau_z, f_x, f_y, f_z]
     bias: list[float] = field(default_factory=lambda: [0.0] * 6)
-    seed: int = 1
-    # Subtract the gripper's own static weight (as after an F/T tool calibration), so that
-    # the reading at rest is the held object's weight alone. Off: the raw weld reaction.
+    seed: int = 1  # seed of the sensor noise
+    # subtract the gripper's own static weight (as after an F/T tool calibration), so the reading
+    # at rest is the held object's weight alone; off: the raw weld reaction
     compensate_gripper: bool = False
 
 
 @dataclasses.dataclass
 class DepthNoiseConfig:
     """Depth noise that grows with range, sigma(z) = a + b (z - z0)^2, as measured for
-    structured-light RGB-D sensors (Nguyen et al. 2012: a = 1.2 mm, b = 1.9 mm/m^2,
-    z0 = 0.4 m). Set ``enabled: false`` for exact depth."""
+    structured-light RGB-D sensors (Nguyen et al. 2012)."""
 
-    enabled: bool = True
-    a: float = 0.0012
-    b: float = 0.0019
-    z0: float = 0.4
-    seed: int = 2
+    enabled: bool = True  # add the noise; false: exact depth
+    a: float = 0.0012  # m: sigma at z0 (Nguyen et al.: 1.2 mm)
+    b: float = 0.0019  # 1/m: growth of sigma with (z - z0)^2 (Nguyen et al.: 1.9 mm/m^2)
+    z0: float = 0.4  # m: range of the least noise (Nguyen et al.: 0.4 m)
+    seed: int = 2  # seed of the depth noise
 
 
 @dataclasses.dataclass
 class DistractorConfig:
     """The walking person: a scripted path of floor waypoints walked at constant speed."""
 
-    enabled: bool = True
-    # [x, y] waypoints on the floor (world frame, m). The default crosses behind the arm.
+    enabled: bool = True  # add the walking person
+    # m: [x, y] floor waypoints in the world frame; the default path crosses behind the arm
     waypoints: list[list[float]] = field(default_factory=lambda: [[-1.0, -2.5], [-1.0, 2.5]])
-    speed: float = 1.0  # m/s
-    start_time: float = 2.0  # s; the person waits at the first waypoint before
+    speed: float = 1.0  # m/s: walking speed
+    start_time: float = 2.0  # s the person waits at the first waypoint before walking
     loop: bool = True  # walk back and forth along the path forever
 
 
 @dataclasses.dataclass
 class BackdropConfig:
     """Posters on the back wall (``models/backdrop.sdf``): a static scene with corners of its own,
-    as a lab wall has (the default room's wall, floor and table show only a few). Off by
-    default; the hand-eye scenarios use it (a camera that turns sees the posters move together)."""
+    as a lab wall has (the default room's wall, floor and table show only a few)."""
 
+    # add the posters: a camera that turns sees them move together (the hand-eye scenarios use it)
     enabled: bool = False
 
 
 @dataclasses.dataclass
 class ToolSlip:
-    """At ``time`` the tool slips in the gripper, within ``duration``, to a new slip state:
-    ``slide`` (m) along the grasp frame's z and ``pivot`` (rad) about its x (the finger
-    closing axis), measured from the tool's configured pose X_GT."""
+    """The tool slips in the gripper to a new slip state, measured from its configured pose X_GT."""
 
-    time: float = 0.0
-    slide: float = 0.0
-    pivot: float = 0.0
-    duration: float = 0.1
+    time: float = 0.0  # s: when the slip starts
+    slide: float = 0.0  # m: new slide along the grasp frame's z
+    pivot: float = 0.0  # rad: new pivot about the grasp frame's x (the finger closing axis)
+    duration: float = 0.1  # s the slip takes
 
 
 @dataclasses.dataclass
 class HeadMove:
-    """At ``time`` the head turns, within ``duration``, to new pan/tilt angles (rad)."""
+    """The head turns to new pan/tilt angles."""
 
-    time: float = 0.0
-    pan: float = 0.0
-    tilt: float = 0.1
-    duration: float = 0.5
+    time: float = 0.0  # s: when the turn starts
+    pan: float = 0.0  # rad: new pan angle
+    tilt: float = 0.1  # rad: new tilt angle
+    duration: float = 0.5  # s the turn takes
 
 
 @dataclasses.dataclass
 class Touch:
-    """From ``time`` for ``duration`` a force ``f_T`` (N, in the tool frame T, so it keeps
-    pushing on the same face while the arm moves) pushes the held tool at the point ``p_TQ``
-    (m, tool frame), like a finger touching it."""
+    """A force pushes the held tool at one point for a while, like a finger touching it."""
 
-    time: float = 0.0
-    duration: float = 1.0
+    time: float = 0.0  # s: when the touch starts
+    duration: float = 1.0  # s the touch lasts
+    # m: the pushed point in the tool frame T
     p_TQ: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # N: the force in the tool frame T, so it keeps pushing on the same face while the arm moves
     f_T: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
 
@@ -193,14 +190,15 @@ Disturbance = ToolSlip | HeadMove | Touch
 
 @dataclasses.dataclass
 class TouchTarget:
-    """A real touch of the table with the held tool: the tool's point ``p_TQ`` (m, tool frame T,
-    e.g. a corner or a face centre) goes down on the table top at ``p_WQ`` = [x, y] (m, world),
-    with the tool oriented so that its direction ``down_T`` (tool frame; a face's outward
-    normal to touch flat with that face, a corner's diagonal to touch with the corner) points
-    straight down."""
+    """A real touch of the table with the held tool: a point of the tool goes down on the table top,
+    the tool turned so that a chosen direction of it points straight down."""
 
+    # m: the touching point in the tool frame T (e.g. a corner or a face centre)
     p_TQ: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.12])
+    # tool-frame direction turned straight down (any length): a face's outward normal to touch flat
+    # with that face, a corner's diagonal to touch with the corner
     down_T: list[float] = field(default_factory=lambda: [0.0, 0.0, 1.0])
+    # m: [x, y] in the world where the point goes down on the table top
     p_WQ: list[float] = field(default_factory=lambda: [0.3, 0.0])
 
 
@@ -214,66 +212,149 @@ class TouchMotionConfig:
     inverse kinematics when the station is built.
     """
 
-    enabled: bool = False
+    enabled: bool = False  # add the touch motion and its station ports
+    # the touches, in order; their postures are solved by inverse kinematics
     targets: list[TouchTarget] = field(default_factory=list)
     approach_height: float = 0.03  # m above the table where the descent starts
     retreat_height: float = 0.12  # m above the table for the moves between touches
     press_depth: float = 0.02  # m below the table top where the descent would end
     descend_speed: float = 0.01  # m/s of the touching point (nearly quasi-static)
-    press_extra: float = 0.004  # m pressed on beyond where the touch was felt
+    press_extra: float = 0.004  # m pressed on beyond where the touch is felt
     keep_touching: float = 2.0  # s the touch is kept once felt
-    start_delay: float = 3.0  # s after touch_start rises (the pause after identification)
+    # s after touch_start rises before the first touch (the pause after identification)
+    start_delay: float = 3.0
     rest: float = 0.5  # s of rest above each target before approaching (observation samples)
-    max_speed: float = 0.5  # rad/s peak joint speed of the moves between touches
+    max_speed: float = 0.5  # rad/s: peak joint speed of the moves between touches
     repeat: bool = True  # start again with the first target after the last
 
 
 @dataclasses.dataclass
 class Scenario:
-    """One simulated experiment. ``duration`` is the default length of ``simulate``."""
+    """One simulated experiment: the world, its sensors, its disturbances and the experiments run on
+    it (``sustain_drake.experiments``)."""
 
-    duration: float = 10.0
+    duration: float = 10.0  # s: default length of a simulate run
+    # the plant: 2 ms discrete (SAP) steps, stable with implicit PD actuators
     plant_config: MultibodyPlantConfig = field(default_factory=_default_plant_config)
+    # the head's RGB-D camera: 30 fps, color, depth and label images, 0.1-5 m depth range
     camera: CameraConfig = field(default_factory=_default_camera)
-    head: HeadConfig = field(default_factory=HeadConfig)
-    tool: ToolConfig = field(default_factory=ToolConfig)
-    motion: MotionConfig = field(default_factory=MotionConfig)
+    head: HeadConfig = field(default_factory=HeadConfig)  # the pan-tilt head carrying the camera
+    tool: ToolConfig = field(default_factory=ToolConfig)  # the held tool and its grasp
+    motion: MotionConfig = field(default_factory=MotionConfig)  # the babbling motion generator
+    # the wrist force/torque sensor
     wrench_sensor: WrenchSensorConfig = field(default_factory=WrenchSensorConfig)
-    depth_noise: DepthNoiseConfig = field(default_factory=DepthNoiseConfig)
-    distractor: DistractorConfig = field(default_factory=DistractorConfig)
-    backdrop: BackdropConfig = field(default_factory=BackdropConfig)
+    depth_noise: DepthNoiseConfig = field(default_factory=DepthNoiseConfig)  # the depth image's noise
+    distractor: DistractorConfig = field(default_factory=DistractorConfig)  # the walking person
+    backdrop: BackdropConfig = field(default_factory=BackdropConfig)  # the posters on the back wall
+    # timeline of tool slips, head moves and touches
     disturbances: list[ToolSlip | HeadMove | Touch] = field(default_factory=list)
+    # touching the table after the identification
     touch_motion: TouchMotionConfig = field(default_factory=TouchMotionConfig)
-    # The experiments run on this world (``sustain_drake.experiments``); each is off by default.
+    # the body-detection experiment on this world (off by default)
     body_detection: BodyDetectionConfig = field(default_factory=BodyDetectionConfig)
+    # the hand-eye experiment on this world (off by default)
     hand_eye: HandEyeConfig = field(default_factory=HandEyeConfig)
+    # the payload and touch experiment on this world (off by default)
     kinesthetic: KinestheticConfig = field(default_factory=KinestheticConfig)
 
 
-def load_scenario(filename: str | Path) -> Scenario:
-    """Loads and checks a scenario file; every problem is a one-line ``ScenarioError``."""
+def load_scenario(filename: str | Path, scenario_name: str | None = None) -> Scenario:
+    """Loads and checks a scenario file; every problem is a one-line ``ScenarioError``.
+
+    A file is either one scenario (its top-level keys are ``Scenario`` fields) or several named
+    scenarios (its top-level keys are names; a variant is a YAML merge of a base, ``<<: *base``).
+    ``scenario_name`` picks one of several; None picks the one named like the file (``hand_eye``
+    in ``hand_eye.yaml``) or the only one."""
     path = Path(filename)
-    if not path.is_file():
-        raise ScenarioError(f"{path}: no such scenario file")
+    name = scenario_name_in(path, scenario_name)
     try:
-        scenario = yaml_load_typed(schema=Scenario, filename=str(path))
+        scenario = yaml_load_typed(schema=Scenario, filename=str(path), child_name=name)
     except Exception as e:  # yaml_load_typed raises RuntimeError/ValueError/yaml errors
-        raise ScenarioError(f"{path}: {_one_line(e)}") from None
+        raise ScenarioError(f"{_where(path, name)}: {_one_line(e)}") from None
     try:
         validate_scenario(scenario)
     except ScenarioError as e:
-        raise ScenarioError(f"{path}: {e}") from None
+        raise ScenarioError(f"{_where(path, name)}: {e}") from None
     return scenario
 
 
+def scenario_name_in(filename: str | Path, scenario_name: str | None = None) -> str | None:
+    """The name of the scenario ``load_scenario`` reads from ``filename``: None for a file that is
+    one scenario, else ``scenario_name`` checked against the file's names (see ``load_scenario``)."""
+    path = Path(filename)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: no such scenario file")
+    names = _top_level_keys(path)
+    fields = {f.name for f in dataclasses.fields(Scenario)}
+    if set(names) <= fields:  # one scenario
+        if scenario_name is not None:
+            raise ScenarioError(f"{path} holds one scenario, not named ones: leave out the scenario name "
+                                f"({scenario_name!r})")
+        return None
+    if scenario_name is None:
+        if path.stem in names or len(names) == 1:
+            return path.stem if path.stem in names else names[0]
+        raise ScenarioError(f"{path} holds the scenarios {', '.join(names)}: name one")
+    if scenario_name not in names:
+        raise ScenarioError(f"{path} has no scenario {scenario_name!r} (it has {', '.join(names)})")
+    return scenario_name
+
+
+def scenario_label(filename: str | Path, scenario_name: str | None = None) -> str:
+    """A run's name for its outputs: the scenario's name, or the file's stem for a one-scenario file."""
+    return scenario_name_in(filename, scenario_name) or Path(filename).stem
+
+
+def _top_level_keys(path: Path) -> list[str]:
+    """The top-level keys of a YAML file, read without building its values (tags are Drake's)."""
+    try:
+        node = yaml.compose(path.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError, OSError) as e:
+        raise ScenarioError(f"{path}: not a readable YAML file ({_one_line(e)})") from None
+    if node is None:
+        return []
+    if not isinstance(node, yaml.MappingNode):
+        raise ScenarioError(f"{path}: a scenario file is a mapping of keys to values")
+    return [k.value for k, _ in node.value]
+
+
+def _where(path: Path, name: str | None) -> str:
+    return f"{path}" if name is None else f"{path} [{name}]"
+
+
 def load_scenario_string(data: str, name: str = "<string>") -> Scenario:
-    """Like ``load_scenario`` for YAML text (tests, embedding)."""
+    """Like ``load_scenario`` for the YAML text of one scenario (tests, embedding)."""
     try:
         scenario = yaml_load_typed(schema=Scenario, data=data)
     except Exception as e:
         raise ScenarioError(f"{name}: {_one_line(e)}") from None
     validate_scenario(scenario)
     return scenario
+
+
+def scenario_text(scenario: Scenario) -> str:
+    """The scenario as YAML, every key written out (what a run actually used)."""
+    return yaml_dump_typed(scenario)
+
+
+# A seed delays the distractor's start by up to this (s), so seeds differ in its phase too.
+SEED_START_SPREAD = 3.0
+
+
+def with_seed(scenario: Scenario, seed: int) -> Scenario:
+    """A copy of ``scenario`` with one seed for the whole run: the motion generator's, the depth and
+    wrench noise's (offset, to keep the streams apart), and the distractor's start, delayed by a
+    seeded 0-``SEED_START_SPREAD`` s."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ScenarioError(f"a seed must be an integer >= 0, got {seed!r}")
+    seeded = copy.deepcopy(scenario)
+    seeded.motion.seed = int(seed)
+    seeded.depth_noise.seed = int(seed) + 1000
+    seeded.wrench_sensor.seed = int(seed) + 2000
+    delay = np.random.default_rng([int(seed), 2024]).uniform(0.0, SEED_START_SPREAD)
+    seeded.distractor.start_time += float(delay)
+    validate_scenario(seeded)
+    return seeded
 
 
 def _one_line(error: Exception) -> str:

@@ -13,6 +13,7 @@ from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
 
 from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank, CandidateParams
+from sustain_drake.identification.coordination import NO_RESET
 from sustain_drake.identification.eye_to_hand import N_UNKNOWNS
 from sustain_drake.identification.sustainable_identifier import Verdict
 from sustain_drake.perception.camera_motion import SceneTurn
@@ -97,6 +98,7 @@ class CandidateIdentifiers(LeafSystem):
         - feature_on_body
         - X_WH
         - reset (optional)
+        - reset_reason (optional)
         - reference_x (optional)
         - allowable_error (optional)
         - depth_image (with camera_info)
@@ -121,13 +123,16 @@ class CandidateIdentifiers(LeafSystem):
     ``MotionCoincidenceDetector``, same order), ``X_WH`` (``RigidTransform``, the hand pose now:
     the pose at each frame's capture time is taken from a short history), ``reset`` (1,
     edge-triggered: a new value drops every candidate; connect a ``CoordinationStateMachine``'s
-    ``reset``), ``reference_x`` (16: the adopted estimate, for ``observation``; connect the state
-    machine's ``adopted_x``), ``allowable_error`` (1, m^2: the state machine's sigma, so that a
-    tracking failure of the observed point, which its witness does not share, is told from a change
-    of the body; unconnected: never). With ``camera_info`` (and ``params.free_space_radius`` > 0):
-    ``depth_image`` (``ImageDepth32F``, m) and ``image_time`` (1, s), the features' frame's depth,
-    against which the adopted tool point is checked every frame (``perception.free_space``; an
-    image from another frame than the features', by ``image_time``, is not used).
+    ``reset``), ``reset_reason`` (1, why: the state machine's ``reset_reason``; a reset for
+    ``coordination.CAMERA_MOVED`` drops the model's camera, any other keeps it as the previous camera
+    that a slipped tool leaves in place; unconnected: never a camera move), ``reference_x`` (16: the
+    adopted estimate, for ``observation``; connect the state machine's ``adopted_x``),
+    ``allowable_error`` (1, m^2: the state machine's sigma, so that a tracking failure of the observed
+    point, which its witness does not share, is told from a change of the body; unconnected: never).
+    With ``camera_info`` (and ``params.free_space_radius`` > 0): ``depth_image`` (``ImageDepth32F``,
+    m) and ``image_time`` (1, s), the features' frame's depth, against which the adopted tool point
+    is checked every frame (``perception.free_space``; an image from another frame than the
+    features', by ``image_time``, is not used).
     ``scene_turn`` (``perception.camera_motion.SceneTurn``: connect a ``CameraMotionDetector``'s
     ``scene_turn``; unconnected: none): with ``params.keep_tool_points``, the camera after a move
     is the old one turned as the static scene shows, placed by the tool points
@@ -169,6 +174,7 @@ class CandidateIdentifiers(LeafSystem):
         self._flags = self.DeclareAbstractInputPort("feature_on_body", AbstractValue.Make(FeatureBodyFlags()))
         self._X_WH = self.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform()))
         self._reset = self.DeclareVectorInputPort("reset", 1)
+        self._reset_reason = self.DeclareVectorInputPort("reset_reason", 1)
         self._reference = self.DeclareVectorInputPort("reference_x", N_UNKNOWNS)
         self._sigma = self.DeclareVectorInputPort("allowable_error", 1)
         self._turn = self.DeclareAbstractInputPort("scene_turn", AbstractValue.Make(SceneTurn()))
@@ -240,6 +246,8 @@ class CandidateIdentifiers(LeafSystem):
             self._depth_gap(context, features.time),
             self._turn.Eval(context) if self._turn.HasValue(context) else None,
             float(self._still.Eval(context)[0]) if self._still.HasValue(context) else np.inf,
+            reset_reason=int(self._reset_reason.Eval(context)[0]) if self._reset_reason.HasValue(context)
+            else NO_RESET,
         )  # fmt: skip
         state.get_mutable_abstract_state(self._bank).set_value(new)
 

@@ -26,6 +26,7 @@ class CoordinationStateMachine(LeafSystem):
         - adopted_solution
         - allowable_error
         - reset
+        - reset_reason
         - pause
         - events
 
@@ -34,12 +35,14 @@ class CoordinationStateMachine(LeafSystem):
     is the newest sample's error under ``adopted_x``: connect ``adopted_x`` to the identifier's
     ``reference_x``). ``camera_motion`` (optional, 2: ``[moving, moves]`` of a
     ``CameraMotionDetector``; beyond the paper): a new camera move is a change detection, the
-    identifier is kept reset while the camera moves (``coordination.step``), and the adopted
-    estimate is cleared (``adopted_x`` zeros: the moved camera is not kept as the previous one);
-    unconnected, the paper's rule alone.
+    identifier is kept reset while the camera moves (``coordination.step``), and the adopted model
+    is dropped (a moved camera's model is no longer a model of anything); unconnected, the paper's
+    rule alone.
 
-    Outputs: ``mode`` (1: 0 IDENTIFY, 1 OBSERVE); ``adopted_x`` (N, zeros before the first
-    convergence); ``adopted_solution`` (the identifier's solution at adoption, or None);
+    Outputs: ``mode`` (1: 0 IDENTIFY, 1 OBSERVE); ``adopted_x`` (N, the adopted estimate; zeros
+    while there is none: before the first convergence and from a camera move to the next
+    convergence; after an observation failure it stays the abandoned model); ``adopted_solution``
+    (the identifier's solution at adoption, or None);
     ``allowable_error`` (1, ``sigma = factor * a^2 lambda_N`` at adoption, in the formulation's
     squared residual units; 0 before); ``reset`` (1, a counter: connect to the identifier's
     ``reset``, which clears its statistic when the count changes); ``pause`` (2,
@@ -85,6 +88,10 @@ class CoordinationStateMachine(LeafSystem):
             prerequisites_of_calc=state,
         )  # fmt: skip
         self.DeclareVectorOutputPort(
+            "reset_reason", 1, lambda c, o: o.SetAtIndex(0, self._vector(c)[coordination.RESET_REASON]),
+            prerequisites_of_calc=state,
+        )  # fmt: skip
+        self.DeclareVectorOutputPort(
             "pause", 2,
             lambda c, o: o.SetFromVector(
                 [self._vector(c)[coordination.PAUSE_ID], self._rule.pause_after_convergence]
@@ -124,7 +131,7 @@ class CoordinationStateMachine(LeafSystem):
             if event.kind in (coordination.CONVERGED, coordination.REFINED):
                 state.get_mutable_abstract_state(self._adopted).set_value(solution)
                 state.get_mutable_discrete_state(self._adopted_x).set_value(solution.x)
-            elif event.detail == coordination.CAMERA_MOVED_DETAIL:
+            elif new[coordination.RESET_REASON] == coordination.CAMERA_MOVED:  # a change detection
                 # The camera is known to have moved: its model is dropped, not offered again as the
                 # "previous camera" that a slipped tool would leave in place.
                 state.get_mutable_abstract_state(self._adopted).set_value(None)

@@ -1,0 +1,218 @@
+"""The whole sustainable sensory-motor coordination as one Diagram for any controller and any arm:
+``make_sustainable_coordination`` combines the hand-eye loop and the payload loop behind documented
+ports."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+
+from sustain_drake.loops.body_detection import BodyDetectionConfig
+from sustain_drake.loops.hand_eye import HandEyeConfig, add_hand_eye_loop
+from sustain_drake.loops.payload import KinestheticConfig, add_payload_loop
+from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
+
+
+class AdoptedEstimates(LeafSystem):
+    """The adopted (converged and still observed) estimates of the two state machines as plain ports.
+
+    .. pydrake_system::
+
+        name: AdoptedEstimates
+        input_ports:
+        - hand_eye_solution
+        - payload_solution
+        output_ports:
+        - X_WC
+        - p_HP
+        - payload_mass
+        - p_KCm
+
+    Inputs: the ``adopted_solution`` of the hand-eye and of the payload ``CoordinationStateMachine``
+    (None before an adoption and after a detected change). Outputs: ``X_WC`` (RigidTransform, the
+    camera pose), ``p_HP`` (3, m, the tool point in the hand frame), ``payload_mass`` (1, kg),
+    ``p_KCm`` (3, m, the payload's centre of mass in the sensor frame). With nothing adopted they
+    hold the identity, zeros and a zero mass (never NaN): read the ``*_mode`` outputs to know.
+    """
+
+    def __init__(self):
+        super().__init__()
+        self._hand_eye = self.DeclareAbstractInputPort("hand_eye_solution", AbstractValue.Make(object()))
+        self._payload = self.DeclareAbstractInputPort("payload_solution", AbstractValue.Make(object()))
+        self.DeclareAbstractOutputPort("X_WC", lambda: AbstractValue.Make(RigidTransform()), self._calc_X_WC)
+        self.DeclareVectorOutputPort("p_HP", 3, self._calc_p_HP)
+        self.DeclareVectorOutputPort("payload_mass", 1, self._calc_mass)
+        self.DeclareVectorOutputPort("p_KCm", 3, self._calc_p_KCm)
+
+    def _estimate(self, context):
+        return getattr(self._hand_eye.Eval(context), "estimate", None)
+
+    def _calc_X_WC(self, context, output) -> None:
+        est = self._estimate(context)
+        output.set_value(RigidTransform() if est is None else RigidTransform(est.X_WC))
+
+    def _calc_p_HP(self, context, output) -> None:
+        est = self._estimate(context)
+        output.SetFromVector(np.zeros(3) if est is None else est.p_HP)
+
+    def _calc_mass(self, context, output) -> None:
+        solution = self._payload.Eval(context)
+        output.SetAtIndex(0, 0.0 if solution is None else solution.mass)
+
+    def _calc_p_KCm(self, context, output) -> None:
+        solution = self._payload.Eval(context)
+        output.SetFromVector(np.zeros(3) if solution is None else solution.p_KCm)
+
+
+def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 30.0,
+                                  hand_eye: HandEyeConfig | None = None,
+                                  body_detection: BodyDetectionConfig | None = None,
+                                  kinesthetic: KinestheticConfig | None = None,
+                                  plant=None, hand_frame=None, sensor_frame=None, model_instance=None,
+                                  held_shape=None, X_KG: RigidTransform | None = None,
+                                  joint_ranges=None, motion_seed: int = 0,
+                                  ) -> Diagram:  # fmt: skip
+    """The sustainable coordination of an arm with ``num_joints`` joints, a depth camera with
+    intrinsics ``camera_info`` (``pydrake.systems.sensors.CameraInfo``) at ``fps`` frames per
+    second, and a wrist force/torque sensor. Settings are the scenario sections' dataclasses
+    (defaults if None). With ``plant`` (a finalized MultibodyPlant of the arm) and ``hand_frame``
+    the hand pose (and the sensor pose, at ``sensor_frame``, else the hand's) is computed from the
+    joint positions (``HandPoseFromPlant``); else it is the ``X_WH`` input and the sensor frame K is
+    the hand frame H. ``held_shape`` (the held object's ``pydrake.geometry`` shape at ``X_KG`` in K)
+    adds the touch estimator. ``joint_ranges`` (n x [lower, upper], rad) are the postures the
+    identifying motion may ask for (needed with ``hand_eye.identifying_motion_interval`` > 0; its
+    draws come from ``motion_seed``).
+
+    .. pydrake_system::
+
+        name: SustainableCoordination
+        input_ports:
+        - color_image
+        - depth_image
+        - image_time (optional)
+        - joint_positions
+        - joint_velocities
+        - X_WH (without plant)
+        - wrench
+        output_ports:
+        - X_WC
+        - p_HP
+        - hand_eye_mode
+        - hand_eye_events
+        - hand_eye_allowable_error
+        - camera_motion (with hand_eye.camera_motion.enabled)
+        - payload_mass
+        - p_KCm
+        - payload_mode
+        - payload_events
+        - touch (with held_shape)
+        - p_WP (with held_shape)
+        - f_env_W (with held_shape)
+        - motion_confirm
+        - hand_eye_pause
+        - payload_pause
+        - X_WH_used
+        - X_WK_used
+
+    Inputs: ``color_image`` (ImageRgba8U), ``depth_image`` (ImageDepth32F, m), ``image_time`` (1, s,
+    the capture time; unconnected: every frame is new), ``joint_positions`` and
+    ``joint_velocities`` (``num_joints``; velocities gate the quasi-static wrench samples),
+    ``X_WH`` (RigidTransform), ``wrench`` (6, ``[tau_K; f_K]`` applied by the wrist on the
+    outboard side, N m and N, in K; see ``identification.payload``).
+
+    Outputs: ``X_WC``, ``p_HP``, ``payload_mass``, ``p_KCm`` (adopted estimates, see
+    ``AdoptedEstimates``); ``hand_eye_mode`` and ``payload_mode`` (1: 0 identify, 1 observe);
+    ``*_events`` (the state machines' event lists); ``hand_eye_allowable_error`` (1, m^2);
+    ``camera_motion`` (2, ``[moving, moves]``: the camera noticed its own motion from the static
+    scene, ``CameraMotionDetector``; each new move is a hand-eye change detection);
+    the touch estimator's ``touch``, ``p_WP``, ``f_env_W``; for the user's motion generator
+    ``motion_confirm`` (the detector's confirming-motion request, paper §3.3, and with
+    ``hand_eye.identifying_motion_interval`` the identifying motion's far postures) and
+    ``hand_eye_pause`` and ``payload_pause`` (2 each, ``[request_id, seconds]``: each state
+    machine asks the motion to stop after a convergence; a new id is a new request); ``X_WH_used``
+    and ``X_WK_used`` (the hand and sensor poses the loops use).
+    """
+    hand_eye = hand_eye or HandEyeConfig()
+    body_detection = body_detection or BodyDetectionConfig()
+    kinesthetic = kinesthetic or KinestheticConfig()
+    if plant is not None and hand_frame is None:
+        raise ValueError("make_sustainable_coordination: a plant needs its hand_frame")
+    if plant is None and not (hand_frame is None and sensor_frame is None and model_instance is None):
+        raise ValueError("make_sustainable_coordination: hand_frame, sensor_frame and model_instance "
+                         "need a plant")  # fmt: skip
+    builder = DiagramBuilder()
+    try:
+        vision = add_hand_eye_loop(builder, camera_info, num_joints, fps, hand_eye, body_detection,
+                                   joint_ranges, motion_seed)  # fmt: skip
+    except ValueError as e:
+        raise ValueError(f"make_sustainable_coordination: {e}") from None
+    touch = add_payload_loop(builder, num_joints, kinesthetic, held_shape, X_KG)
+
+    for name in ("color_image", "depth_image", "image_time"):
+        first, *others = vision.image_inputs(name)
+        builder.ExportInput(first, name)
+        for port in others:
+            builder.ConnectInput(name, port)
+    first, *others = vision.actuator_inputs()
+    joint_positions = builder.ExportInput(first, "joint_positions")
+    for port in others:
+        builder.ConnectInput(joint_positions, port)
+    builder.ExportInput(touch.gate.GetInputPort("joint_velocities"), "joint_velocities")
+    if plant is not None:
+        fk = builder.AddSystem(HandPoseFromPlant(plant, hand_frame, sensor_frame, model_instance))
+        fk.set_name("hand_pose_from_plant")
+        if fk.get_input_port().size() != num_joints:
+            raise ValueError(f"make_sustainable_coordination: the plant has {fk.get_input_port().size()} "
+                             f"positions for num_joints = {num_joints}")  # fmt: skip
+        builder.ConnectInput(joint_positions, fk.get_input_port())
+        X_WH, X_WK = fk.GetOutputPort("X_WH"), fk.GetOutputPort("X_WK")
+    else:
+        passthrough = builder.AddSystem(_PosePassThrough())
+        builder.ExportInput(passthrough.get_input_port(), "X_WH")
+        X_WH = X_WK = passthrough.get_output_port()
+    builder.Connect(X_WH, vision.candidates.GetInputPort("X_WH"))
+    consumers = [touch.identifier] + ([touch.estimator] if touch.estimator is not None else [])
+    wrench = [system.GetInputPort("wrench") for system in consumers]
+    builder.ExportInput(wrench[0], "wrench")
+    for port in wrench[1:]:
+        builder.ConnectInput("wrench", port)
+    for system in consumers:
+        builder.Connect(X_WK, system.GetInputPort("X_WK"))
+
+    adopted = builder.AddSystem(AdoptedEstimates())
+    adopted.set_name("adopted_estimates")
+    for prefix, machine in (("hand_eye", vision.state_machine), ("payload", touch.state_machine)):
+        builder.Connect(machine.GetOutputPort("adopted_solution"), adopted.GetInputPort(f"{prefix}_solution"))
+    for name in ("X_WC", "p_HP", "payload_mass", "p_KCm"):
+        builder.ExportOutput(adopted.GetOutputPort(name), name)
+    for prefix, machine in (("hand_eye", vision.state_machine), ("payload", touch.state_machine)):
+        builder.ExportOutput(machine.GetOutputPort("mode"), f"{prefix}_mode")
+        builder.ExportOutput(machine.GetOutputPort("events"), f"{prefix}_events")
+    builder.ExportOutput(vision.state_machine.GetOutputPort("allowable_error"), "hand_eye_allowable_error")
+    if vision.camera_motion is not None:
+        builder.ExportOutput(vision.camera_motion.GetOutputPort("camera_motion"), "camera_motion")
+    if touch.estimator is not None:
+        for name in ("touch", "p_WP", "f_env_W"):
+            builder.ExportOutput(touch.estimator.GetOutputPort(name), name)
+    builder.ExportOutput(vision.motion_confirm(), "motion_confirm")
+    builder.ExportOutput(vision.state_machine.GetOutputPort("pause"), "hand_eye_pause")
+    builder.ExportOutput(touch.state_machine.GetOutputPort("pause"), "payload_pause")
+    builder.ExportOutput(X_WH, "X_WH_used")
+    builder.ExportOutput(X_WK, "X_WK_used")
+    diagram = builder.Build()
+    diagram.set_name("sustainable_coordination")
+    return diagram
+
+
+class _PosePassThrough(LeafSystem):
+    """One pose input fanned out inside the diagram (an exported input feeds several ports, and is
+    also exported as an output)."""
+
+    def __init__(self):
+        super().__init__()
+        port = self.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform()))
+        self.DeclareAbstractOutputPort(
+            "X_WH", lambda: AbstractValue.Make(RigidTransform()),
+            lambda context, output: output.set_value(port.Eval(context)))  # fmt: skip
