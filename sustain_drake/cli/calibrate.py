@@ -29,6 +29,15 @@ from sustain_drake.recorded_data import (
 OUTLIER_FACTOR = 3.0
 
 
+# The convergence criteria (paper §3.1 (a)-(c)) as options: flag, type, ConvergenceCriteria field, help.
+CRITERIA_FLAGS = (
+    ("--max-rms", float, "max_expected_rms", "criterion (a): largest expected RMS error, m"),
+    ("--min-gap", float, "min_gap_ratio", "criterion (b): smallest lambda_15/lambda_16"),
+    ("--max-ssd", float, "max_ssd", "criterion (c): largest SSD to a rotation"),
+    ("--min-samples", int, "min_samples", "fewest samples"),
+)
+
+
 def register(subparsers) -> None:
     calibrate = subparsers.add_parser("calibrate", help="calibrate from recorded data")
     kinds = calibrate.add_subparsers(dest="kind", required=True)
@@ -47,37 +56,16 @@ def register(subparsers) -> None:
     p.add_argument("--camera-config", type=Path,
                    help="also write X_WC as a Drake CameraConfig YAML (X_PB in the world)")
     defaults = eye_to_hand_formulation.default_criteria()
-    p.add_argument(
-        "--max-rms",
-        type=float,
-        default=defaults.max_expected_rms,
-        help="criterion (a): largest expected RMS error, m (default %(default)s)",
-    )
-    p.add_argument(
-        "--min-gap",
-        type=float,
-        default=defaults.min_gap_ratio,
-        help="criterion (b): smallest lambda_15/lambda_16 (default %(default)s)",
-    )
-    p.add_argument(
-        "--max-ssd",
-        type=float,
-        default=defaults.max_ssd,
-        help="criterion (c): largest SSD to a rotation (default %(default)s)",
-    )
-    p.add_argument(
-        "--min-samples", type=int, default=defaults.min_samples, help="fewest samples (default %(default)s)"
-    )
+    for flag, kind, field, text in CRITERIA_FLAGS:
+        p.add_argument(flag, type=kind, default=getattr(defaults, field), dest=field,
+                       help=f"{text} (default %(default)s)")
     p.set_defaults(handler=_run_eye_to_hand)
 
 
 def _criteria(args) -> ConvergenceCriteria:
     try:
         return ConvergenceCriteria(
-            max_expected_rms=args.max_rms,
-            min_gap_ratio=args.min_gap,
-            max_ssd=args.max_ssd,
-            min_samples=args.min_samples,
+            **{field: getattr(args, field) for _, _, field, _ in CRITERIA_FLAGS},
         )
     except ValueError as e:
         raise CliError(str(e)) from None

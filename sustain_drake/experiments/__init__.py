@@ -1,8 +1,7 @@
 """Experiments: the paper's §4 experiments as blocks added to the station's diagram.
 
-Each experiment is a module with a config dataclass (a section of the scenario file, in its own
-``*_config.py`` module so that the scenario schema does not import pydrake systems) and two
-functions used by ``sustain-drake simulate``:
+Each experiment is a module whose settings are a section of the scenario file (the loop's settings
+dataclass in ``sustain_drake.loops``), with two functions that ``run.simulate_scenario`` calls:
 
 - ``add_to_diagram(builder, station, scenario, meshcat) -> handle``: adds the experiment's
   systems (perception, identifiers, state machines, evaluation loggers) to ``builder``, wired to

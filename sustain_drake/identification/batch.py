@@ -139,20 +139,8 @@ def calibrate_eye_to_hand(p_C, X_WH, criteria: ConvergenceCriteria | None = None
         p_HP = estimate.p_HP
         residuals = eye_to_hand_residuals(X_WC, p_HP, p_C, X_WH)
     rms = float(np.sqrt(np.mean(residuals**2))) if len(residuals) else math.inf
-    gap = solution.eigen.gap_ratio if solution.eigen is not None else 1.0
-    return EyeToHandResult(
-        X_WC=X_WC,
-        p_HP=p_HP,
-        residuals=residuals,
-        rms=rms,
-        eigenvalues=solution.eigenvalues,
-        gap_ratio=gap,
-        ssd=solution.ssd,
-        expected_rms=solution.expected_rms,
-        verdict=solution.verdict,
-        projected=solution.projected,
-        refined=solution.refined,
-    )
+    return EyeToHandResult(X_WC=X_WC, p_HP=p_HP, residuals=residuals, rms=rms, ssd=solution.ssd,
+                           projected=solution.projected, refined=solution.refined, **_statistics(solution))
 
 
 @dataclass(frozen=True)
@@ -215,14 +203,14 @@ def identify_payload(
     f_W = np.einsum("nij,nj->ni", R_WK, f)
     force_res = np.linalg.norm(f_W + solution.mass * identifier.g_W, axis=1)
     torque_res = np.linalg.norm(tau - np.cross(solution.p_KCm, f), axis=1)
+    return PayloadResult(mass=solution.mass, p_KCm=solution.p_KCm, force_residuals=force_res,
+                         torque_residuals=torque_res, **_statistics(solution))
+
+
+def _statistics(solution) -> dict:
+    """What every batch result reports of its identification: the eigenvalues of C, the gap
+    ``lambda_{N-1} / lambda_N`` (1 without an eigen-decomposition), the expected RMS error and the
+    verdict."""
     gap = solution.eigen.gap_ratio if solution.eigen is not None else 1.0
-    return PayloadResult(
-        mass=solution.mass,
-        p_KCm=solution.p_KCm,
-        force_residuals=force_res,
-        torque_residuals=torque_res,
-        eigenvalues=solution.eigenvalues,
-        gap_ratio=gap,
-        expected_rms=solution.expected_rms,
-        verdict=solution.verdict,
-    )
+    return {"eigenvalues": solution.eigenvalues, "gap_ratio": gap, "expected_rms": solution.expected_rms,
+            "verdict": solution.verdict}

@@ -110,13 +110,10 @@ class MotionGenerator(LeafSystem):
                              "confirm_hold, confirm_step and confirm_near >= 0")
         self._n = n
         self._seed = int(seed)
-        self._period = float(period)
-        self._max_speed = float(max_speed)
-        self._min_duration = float(min_duration)
-        self._dwell = float(dwell)
-        self._confirm_hold = float(confirm_hold)
-        self._confirm_step = float(confirm_step)
-        self._confirm_near = float(confirm_near)
+        self._period, self._max_speed, self._min_duration, self._dwell = map(
+            float, (period, max_speed, min_duration, dwell))
+        self._confirm_hold, self._confirm_step, self._confirm_near = map(
+            float, (confirm_hold, confirm_step, confirm_near))
         q_init = np.clip(q_init, self._lower, self._upper)
 
         # Start with a first move from the initial posture (segment 0 -> goal 0).

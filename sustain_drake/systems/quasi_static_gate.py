@@ -50,12 +50,9 @@ class QuasiStaticGate(LeafSystem):
         if not (all(v > 0 and math.isfinite(v) for v in values) and window >= 0 and touch_holdoff >= 0):
             raise ValueError("QuasiStaticGate: period, thresholds and max_touch_duration must be > 0")
         self._n = int(num_joints)
-        self._period = float(period)
-        self._max_speed = float(max_speed)
-        self._max_acceleration = float(max_acceleration)
-        self._window = float(window)
-        self._holdoff = float(touch_holdoff)
-        self._max_touch = float(max_touch_duration)
+        self._period, self._max_speed, self._max_acceleration = map(
+            float, (period, max_speed, max_acceleration))
+        self._window, self._holdoff, self._max_touch = map(float, (window, touch_holdoff, max_touch_duration))
         x0 = np.zeros(_HEADER + self._n)
         x0[_TOUCH_SINCE] = -1.0
         x0[_TOUCH_LAST] = -math.inf

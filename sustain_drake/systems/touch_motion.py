@@ -90,14 +90,10 @@ class TouchMotion(LeafSystem):
                 and start_delay >= 0 and period > 0 and min_duration > 0 and rest >= 0):  # fmt: skip
             raise ValueError("TouchMotion: durations and speeds must be positive, press_extra in [0, 1]")
         self._n = n
-        self._descend = float(descend_duration)
-        self._keep = float(keep_touching)
-        self._extra = float(press_extra)
-        self._max_speed = float(max_speed)
-        self._delay = float(start_delay)
+        self._descend, self._keep, self._extra, self._rest = map(
+            float, (descend_duration, keep_touching, press_extra, rest))
+        self._max_speed, self._delay, self._min_duration = map(float, (max_speed, start_delay, min_duration))
         self._repeat = bool(repeat)
-        self._min_duration = float(min_duration)
-        self._rest = float(rest)
         x0 = np.zeros(_HEADER + 3 * n)
         x0[_START_SINCE] = -1.0
         x0[_TOUCH_S] = -1.0
