@@ -35,7 +35,7 @@ RESULTS_PAGE = Path(__file__).resolve().parents[1] / "docs" / "results.md"
 def publish(section: str, lines: list[str], page: Path = RESULTS_PAGE) -> None:
     """Replaces the block ``section`` of the results page (between ``<!-- BEGIN section -->`` and
     ``<!-- END section -->``) with ``lines``, the command that made them and the commit it ran on
-    (a dirty tree says so). The page's prose around the block is kept."""
+    (local changes to code say so). The page's prose around the block is kept."""
     text = page.read_text(encoding="utf-8")
     begin, end = f"<!-- BEGIN {section} -->", f"<!-- END {section} -->"
     if begin not in text or end not in text:
@@ -59,4 +59,6 @@ def _commit() -> str:
         return subprocess.run(["git", *args], cwd=RESULTS_PAGE.parents[1], capture_output=True,
                               text=True).stdout.strip()
     commit = git("rev-parse", "--short", "HEAD") or "unknown"
-    return commit + (" with local changes" if git("status", "--porcelain", "--untracked-files=no") else "")
+    # Changes to the docs (this page among them) do not change what ran.
+    dirty = git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!docs")
+    return commit + (" with local changes" if dirty else "")
