@@ -76,11 +76,13 @@ def run_eye_to_hand(
     poses: Path,
     out: Path | None,
     criteria: ConvergenceCriteria,
-    stream=sys.stdout,
+    stream=None,
     camera_config: Path | None = None,
 ) -> int:
     """Reads, calibrates, prints and (if converged) writes the YAML result and, if asked, the
-    camera pose as a Drake ``CameraConfig``. Returns the exit code."""
+    camera pose as a Drake ``CameraConfig``. Returns the exit code. ``stream``: where to print
+    (default: the standard output when called, not when imported)."""
+    stream = sys.stdout if stream is None else stream
     try:
         p_C = read_points_csv(points)
         X_WH = read_poses_csv(poses)
