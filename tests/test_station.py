@@ -216,6 +216,10 @@ def test_a_misspelled_key_names_the_key(tmp_path, text, key):
     ("wrench_sensor: {bias: [1, 2]}\n", "bias"),
     ("camera: {z_near: 9}\n", "camera"),
     ("[1, 2]\n", "dict"),
+    # The math layer's settings, checked at load even with their experiment off.
+    ("hand_eye: {candidates: {max_candidates: 0}}\n", "hand_eye.candidates: max_candidates must be >= 1"),
+    ("hand_eye: {refinement: {corner_window_px: -3}}\n", "hand_eye.refinement: window sizes"),
+    ("hand_eye: {camera_motion: {min_background: 1}}\n", "hand_eye.camera_motion: invalid camera motion"),
 ])
 def test_bad_values_are_one_line_errors(text, words):
     with pytest.raises(ScenarioError) as error:

@@ -436,6 +436,15 @@ def validate_scenario(s: Scenario) -> None:
             _check(s.tool.model != "none", f"{name}: there is no tool to slip")
         else:
             _finite([e.pan, e.tilt], name)
+    # The math layer's settings check themselves on construction; a loaded file set their fields
+    # one by one, so construct a copy (whether or not the experiment is on).
+    for name, section in (("hand_eye.candidates", s.hand_eye.candidates),
+                          ("hand_eye.refinement", s.hand_eye.refinement),
+                          ("hand_eye.camera_motion", s.hand_eye.camera_motion)):
+        try:
+            dataclasses.replace(section)
+        except ValueError as e:
+            raise ScenarioError(f"{name}: {_one_line(e)}") from None
     k = s.kinesthetic
     if k.enabled:
         _check(s.tool.model == "box", "kinesthetic: needs tool.model: box (the tool with a collision "
