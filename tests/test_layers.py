@@ -1,5 +1,5 @@
-"""The package's layers point one way: math -> systems -> loops -> station -> experiments -> command
-line, with the shared helpers at the bottom. Checked on the import graph of the source itself."""
+"""The package's layers point one way: math -> systems -> loops -> station -> experiments -> sweeps ->
+command line, with the shared helpers at the bottom. Checked on the import graph of the source itself."""
 
 from __future__ import annotations
 
@@ -15,12 +15,13 @@ PACKAGE = ROOT / "sustain_drake"
 
 # Bottom to top; a module may import its own layer and the layers below it, never one above.
 LAYERS = (
-    ("helpers", ("sustain_drake.files",)),
+    ("helpers", ("sustain_drake.files", "sustain_drake.provenance")),
     ("math", ("sustain_drake.identification", "sustain_drake.perception", "sustain_drake.recorded_data")),
     ("systems", ("sustain_drake.systems", "sustain_drake.calibration_export")),
     ("loops", ("sustain_drake.loops",)),
     ("station", ("sustain_drake.station",)),
     ("experiments", ("sustain_drake.experiments",)),
+    ("sweeps", ("sustain_drake.sweeps",)),
     ("command line", ("sustain_drake.cli",)),
 )
 MATH = ("sustain_drake.identification", "sustain_drake.perception", "sustain_drake.recorded_data")

@@ -63,3 +63,12 @@ def test_the_readme_calibration_command_runs_on_the_real_data(tmp_path, monkeypa
              "result.yaml": tmp_path / "result.yaml"}
     assert main([str(files.get(a, a)) for a in command]) == 0
     assert "X_WC" in (tmp_path / "result.yaml").read_text()
+
+
+def test_the_readme_sweep_command_lists_its_cells(monkeypatch, capsys):
+    """The sweep runs for minutes (tests/test_sweep.py runs short ones); here its file is read and
+    every cell built and checked."""
+    (command,) = [c[1:] for c in readme_commands() if c[1:2] == ["sweep"]]
+    monkeypatch.chdir(ROOT)
+    assert main(command + ["--list"]) == 0
+    assert len(capsys.readouterr().out.strip().splitlines()) >= 64

@@ -18,6 +18,7 @@ COMMAND_MODULES = (
     "sustain_drake.cli.calibrate",
     "sustain_drake.cli.demo",
     "sustain_drake.cli.simulate",
+    "sustain_drake.cli.sweep",
     "sustain_drake.cli.graph",
 )
 

@@ -270,7 +270,7 @@ def load_scenario(filename: str | Path, scenario_name: str | None = None) -> Sce
     try:
         scenario = yaml_load_typed(schema=Scenario, filename=str(path), child_name=name)
     except Exception as e:  # yaml_load_typed raises RuntimeError/ValueError/yaml errors
-        raise ScenarioError(f"{_where(path, name)}: {_one_line(e)}") from None
+        raise ScenarioError(f"{_where(path, name)}: {one_line(e)}") from None
     try:
         validate_scenario(scenario)
     except ScenarioError as e:
@@ -310,7 +310,7 @@ def _top_level_keys(path: Path) -> list[str]:
     try:
         node = yaml.compose(path.read_text(encoding="utf-8"))
     except (yaml.YAMLError, UnicodeDecodeError, OSError) as e:
-        raise ScenarioError(f"{path}: not a readable YAML file ({_one_line(e)})") from None
+        raise ScenarioError(f"{path}: not a readable YAML file ({one_line(e)})") from None
     if node is None:
         return []
     if not isinstance(node, yaml.MappingNode):
@@ -327,7 +327,7 @@ def load_scenario_string(data: str, name: str = "<string>") -> Scenario:
     try:
         scenario = yaml_load_typed(schema=Scenario, data=data)
     except Exception as e:
-        raise ScenarioError(f"{name}: {_one_line(e)}") from None
+        raise ScenarioError(f"{name}: {one_line(e)}") from None
     validate_scenario(scenario)
     return scenario
 
@@ -357,7 +357,8 @@ def with_seed(scenario: Scenario, seed: int) -> Scenario:
     return seeded
 
 
-def _one_line(error: Exception) -> str:
+def one_line(error: Exception) -> str:
+    """A yaml_load_typed or Drake error as one line a user acts on (unknown keys and tags named)."""
     message = " ".join(str(error).split())
     # yaml_load_typed says "The fields ['fooo'] were unknown to the schema".
     unknown = re.search(r"The fields \[(.*?)\] were unknown", message)
@@ -391,7 +392,7 @@ def validate_scenario(s: Scenario) -> None:
     try:
         s.camera.MakeCameras()  # validates the intrinsics and ranges
     except Exception as e:
-        raise ScenarioError(f"camera: {_one_line(e)}") from None
+        raise ScenarioError(f"camera: {one_line(e)}") from None
     _check(s.camera.renderer_class in ("", "RenderEngineVtk"),
            "camera.renderer_class: only Drake's VTK renderer is supported (headless)")
     _check(s.tool.model in TOOL_MODELS, f"tool.model must be one of {', '.join(TOOL_MODELS)}")
@@ -444,7 +445,7 @@ def validate_scenario(s: Scenario) -> None:
         try:
             dataclasses.replace(section)
         except ValueError as e:
-            raise ScenarioError(f"{name}: {_one_line(e)}") from None
+            raise ScenarioError(f"{name}: {one_line(e)}") from None
     k = s.kinesthetic
     if k.enabled:
         _check(s.tool.model == "box", "kinesthetic: needs tool.model: box (the tool with a collision "
