@@ -9,7 +9,7 @@ from eye_to_hand_data import make_truth, rotation_error_deg
 from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import candidates
-from sustain_drake.identification.candidates import CandidateBank, CandidateParams
+from sustain_drake.identification.candidates import CandidateBank, CandidateParams, FrameInput
 from sustain_drake.identification.coordination import CAMERA_MOVED
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, default_criteria, pack_x
 
@@ -54,9 +54,9 @@ def run(frames, bank=None, reset=0.0, reference=None, start=0, params=PARAMS,
         if out is None:
             return bank, k
         ids, p, valid, body = out
-        bank = candidates.step(bank, params, CRITERIA, k * DT, reset, X, k * DT, np.array(ids), np.array(p),
-                               np.array(valid), np.array(body), reference,
-                               scene_still_since=scene_still_since)
+        frame = FrameInput(k * DT, reset, X, k * DT, np.array(ids), np.array(p), np.array(valid),
+                           np.array(body), reference, scene_still_since=scene_still_since)
+        bank = candidates.step(bank, params, CRITERIA, frame)
     return bank, k
 
 
@@ -161,9 +161,10 @@ def test_reset_drops_every_candidate_and_a_new_round_starts():
 
     bank, k = run(frames)
     assert bank.leader == 9
-    bank = candidates.step(bank, PARAMS, CRITERIA, k * DT, 1.0, hand_pose(k), k * DT, np.array([9]),
-                           np.array([seen(hand_pose(k), P_TOOL, np.random.default_rng(0))]), np.array([True]),
-                           np.array([True]))
+    frame = FrameInput(k * DT, 1.0, hand_pose(k), k * DT, np.array([9]),
+                       np.array([seen(hand_pose(k), P_TOOL, np.random.default_rng(0))]), np.array([True]),
+                       np.array([True]))
+    bank = candidates.step(bank, PARAMS, CRITERIA, frame)
     assert bank.leader == -1 and [c.feature_id for c in bank.candidates] == [9]
     assert bank.find(9).solution.num_samples == 1 and bank.round_start == pytest.approx(k * DT)
 
@@ -262,9 +263,9 @@ def test_a_witness_tells_a_sliding_track_from_a_change_of_the_body():
     for k in range(480):
         X = hand_pose(k)
         ids, points, valid, body = frames(k, X, rng)
-        bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids),
-                               np.array(points), np.array(valid), np.array(body), x_true,
-                               allowable_error=sigma)
+        frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(points), np.array(valid),
+                           np.array(body), x_true, allowable_error=sigma)
+        bank = candidates.step(bank, params, CRITERIA, frame)
         errors.append(bank.sample_error)
         if k == 399:
             assert bank.leader == 9 and bank.observed == 9 and bank.witness == 4
@@ -377,8 +378,9 @@ def test_joint_refinement_uses_ended_tracks_of_the_hand_and_not_another_link(sti
         if out is None:
             break
         ids, p, valid, body = out
-        bank = candidates.step(bank, params, criteria, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
-                               np.array(valid), np.array(body))
+        frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(p), np.array(valid),
+                           np.array(body))
+        bank = candidates.step(bank, params, criteria, frame)
     assert 4 in [c.feature_id for c in bank.archive]
     assert bank.leader == 9
     assert bank.adoptions[0].kind == "identified, camera refined with 2 points"  # 9 and 4, not 7
@@ -386,8 +388,9 @@ def test_joint_refinement_uses_ended_tracks_of_the_hand_and_not_another_link(sti
     assert rotation_error_deg(est.R_WC, TRUTH.X_WC[:3, :3]) < 0.5
     assert np.linalg.norm(est.p_HP - P_TOOL) < 0.005
     # A reset empties the archive.
-    bank = candidates.step(bank, params, criteria, 300 * DT, 1.0, hand_pose(300), 300 * DT, np.array([9]),
-                           np.array([seen(hand_pose(300), P_TOOL, rng)]), np.array([True]), np.array([True]))
+    frame = FrameInput(300 * DT, 1.0, hand_pose(300), 300 * DT, np.array([9]),
+                       np.array([seen(hand_pose(300), P_TOOL, rng)]), np.array([True]), np.array([True]))
+    bank = candidates.step(bank, params, criteria, frame)
     assert bank.archive == ()
 
 
@@ -410,8 +413,9 @@ def test_observers_keep_observing_when_the_observed_point_and_witness_are_gone_a
         shift = slip if k >= 560 else 0.0
         ids = [i for i in points if i not in lost]
         p = [seen(X, points[i] + shift, rng) for i in ids]
-        bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
-                               np.ones(len(ids), bool), np.ones(len(ids), bool), x_true, allowable_error=1e-4)
+        frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(p), np.ones(len(ids), bool),
+                           np.ones(len(ids), bool), x_true, allowable_error=1e-4)
+        bank = candidates.step(bank, params, CRITERIA, frame)
         counts[k] = (bank.sample_count, bank.sample_error)
     # Between the loss (400) and the slip (560): a sample every frame, within the noise.
     assert counts[559][0] - counts[410][0] == 149
@@ -442,9 +446,9 @@ def test_a_lone_point_of_the_hand_that_slides_away_is_a_tracking_failure_while_t
                 if i in sliding and k >= 480:  # 20 frames onto a point of the background, and stays
                     a = min((k - 480) / 20.0, 1.0)
                     p[j] = (1 - a) * p[j] + a * background
-            bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
-                                   np.ones(len(ids), bool), np.ones(len(ids), bool), x_true,
-                                   allowable_error=1e-4)
+            frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(p), np.ones(len(ids), bool),
+                               np.ones(len(ids), bool), x_true, allowable_error=1e-4)
+            bank = candidates.step(bank, params, CRITERIA, frame)
             out[k] = (bank.sample_count, bank.sample_error, {o[0] for o in bank.observers})
         return out
 
@@ -472,16 +476,18 @@ def test_the_adopted_camera_is_refined_while_observing():
         ids = list(points)
         p = [seen(X, points[i], rng) for i in ids]
         reference = x_off if bank.leader >= 0 else None  # the (wrong) adopted model once there is one
-        bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
-                               np.ones(3, bool), np.ones(3, bool), reference, allowable_error=1e-3)
+        frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(p), np.ones(3, bool),
+                           np.ones(3, bool), reference, allowable_error=1e-3)
+        bank = candidates.step(bank, params, CRITERIA, frame)
     assert bank.refinement >= 5 and bank.refined_solution is not None
     refined = bank.refined_solution
     assert refined.verdict.converged and refined.refinement == bank.refinement
     assert rotation_error_deg(refined.estimate.R_WC, TRUTH.X_WC[:3, :3]) < 0.1
     assert rotation_error_deg(R_off, TRUTH.X_WC[:3, :3]) > 0.5
     # A reset drops the refinement.
-    bank = candidates.step(bank, params, CRITERIA, 400 * DT, 1.0, hand_pose(400), 400 * DT, np.array([9]),
-                           np.array([seen(hand_pose(400), P_TOOL, rng)]), np.array([True]), np.array([True]))
+    frame = FrameInput(400 * DT, 1.0, hand_pose(400), 400 * DT, np.array([9]),
+                       np.array([seen(hand_pose(400), P_TOOL, rng)]), np.array([True]), np.array([True]))
+    bank = candidates.step(bank, params, CRITERIA, frame)
     assert bank.refined_solution is None
 
 
@@ -504,8 +510,9 @@ def test_with_no_observed_point_the_candidates_tell_a_moved_camera():
             X_WC = camera_after if after else TRUTH.X_WC
             p = [X_WC[:3, :3].T @ (X[:3, :3] @ points[i] + X[:3, 3] - X_WC[:3, 3]) + rng.normal(0, 5e-4, 3)
                  for i in points]
-            bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
-                                   np.ones(3, bool), np.ones(3, bool), x_true, allowable_error=1e-4)
+            frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(p), np.ones(3, bool),
+                               np.ones(3, bool), x_true, allowable_error=1e-4)
+            bank = candidates.step(bank, params, CRITERIA, frame)
             counts[k] = (bank.sample_count, bank.sample_error)
         return counts
 
@@ -550,7 +557,7 @@ def test_stitching_tracks_of_one_point_pins_the_camera_and_keeps_other_marks_apa
               weak_track(4, p_other, [0.4, 0.0, 0.0], 0.02, rng)]
     errors = {}
     for radius in (0.0, 0.005):
-        best, points = candidates._joint_refined(leader, tracks, [], CandidateParams(joint=True,
+        best, points = candidates.fitting.joint_refined(leader, tracks, [], CandidateParams(joint=True,
                                                                                     stitch_radius=radius))
         assert len(points) == (4 if radius == 0 else 2)  # stitched: the tracks of P_TOOL are one point
         est = best.solution.estimate
@@ -591,9 +598,10 @@ def _slip_with_every_track_lost(params, slip, depth=False):
         def depth_gap(p_CP, tool_C=tool_C):
             return 0.0 if np.linalg.norm(p_CP - tool_C) < 0.03 else 2.0 - p_CP[2]
 
-        bank = candidates.step(bank, params, CRITERIA, k * DT, 0.0, X, k * DT, np.array(ids), np.array(p),
-                               np.ones(3, bool), np.ones(3, bool), x_true, allowable_error=1e-4,
-                               depth_gap=depth_gap if depth else None)
+        frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(p), np.ones(3, bool),
+                           np.ones(3, bool), x_true, allowable_error=1e-4,
+                           depth_gap=depth_gap if depth else None)
+        bank = candidates.step(bank, params, CRITERIA, frame)
         counts[k] = (bank.sample_count, bank.sample_error)
     return counts, bank
 
@@ -680,9 +688,10 @@ def test_after_a_camera_move_the_tool_points_are_kept_and_only_the_camera_is_new
             # at the move.
             adopted = (None if after or bank.leader < 0
                        else pack_x(X_WC[:3, :3], X_WC[:3, 3], points[bank.leader]))
-            bank = candidates.step(bank, params, CRITERIA, k * DT, float(after), X, k * DT,
-                                   np.array(list(points)), np.array(p), np.ones(5, bool), np.ones(5, bool),
-                                   adopted, allowable_error=1e-4, reset_reason=CAMERA_MOVED)
+            frame = FrameInput(k * DT, float(after), X, k * DT, np.array(list(points)), np.array(p),
+                               np.ones(5, bool), np.ones(5, bool), adopted, allowable_error=1e-4,
+                               reset_reason=CAMERA_MOVED)
+            bank = candidates.step(bank, params, CRITERIA, frame)
             if after and bank.leader >= 0:
                 return bank, k
         return bank, None
@@ -765,7 +774,7 @@ def test_a_held_view_is_one_sample_with_min_view_change():
         params = replace(PARAMS, min_view_change=d, max_unconverged_time=100.0)
         bank, _ = run(frames, params=params, pose=pose)
         c = bank.find(5)
-        est = candidates._identifier(c, CRITERIA, 1.0).solve(refine_estimate=True).estimate
+        est = candidates.admission.identifier_of(c, CRITERIA, 1.0).solve(refine_estimate=True).estimate
         errors[d] = np.linalg.norm(est.p_WC - TRUTH.X_WC[:3, 3])
         counts[d] = c.solution.num_samples
         assert c.admitted == 0.0  # held for 10 s (> max_lost_time), seen all along: not lost
@@ -922,7 +931,7 @@ def test_joint_consistency_leaves_out_a_point_with_an_error_of_its_own():
     assert rms[1] < 1.3 * rms[0] and 2.0 * rms[0] < rms[2] < 3.0 * rms[0]
     errors = {}
     for consistency, members in ((3.0, 3), (2.0, 2)):
-        best, points = candidates._joint_refined(leader, [good, stray], [], CandidateParams(
+        best, points = candidates.fitting.joint_refined(leader, [good, stray], [], CandidateParams(
             joint=True, joint_consistency=consistency))
         assert len(points) == members
         errors[consistency] = np.linalg.norm(best.solution.estimate.p_WC - TRUTH.X_WC[:3, 3])
@@ -945,12 +954,12 @@ def test_joint_weighted_trusts_each_point_by_its_own_error():
                   tracked(3, P_TOOL + [-0.02, 0.03, 0.05], rng, noise=0.5e-3),
                   tracked(4, P_TOOL + [0.0, 0.03, 0.02], rng, noise=3e-3)]
         for weighted in (False, True):
-            best, points = candidates._joint_refined(leader, others, [], CandidateParams(
+            best, points = candidates.fitting.joint_refined(leader, others, [], CandidateParams(
                 joint=True, joint_consistency=10.0, joint_weighted=weighted))
             assert len(points) == 4
             est = best.solution.estimate
             errors[weighted].append(np.linalg.norm(est.p_WC - TRUTH.X_WC[:3, 3]))
-        weights = candidates._inverse_variance_weights(
+        weights = candidates.fitting.inverse_variance_weights(
             np.array([candidates.own_fit(s, est.R_WC, est.p_WC)[1] for s in points]))
         assert weights.mean() == pytest.approx(1.0)
         assert 25 < weights[:3].mean() / weights[3] < 50
@@ -962,4 +971,4 @@ def test_joint_weighted_trusts_each_point_by_its_own_error():
     est = exact[0].solution.estimate
     mse = np.array([candidates.own_fit(c.statistic, est.R_WC, est.p_WC)[1] for c in exact])
     assert mse.max() < 1e-12  # round-off: the floor decides
-    assert np.allclose(candidates._inverse_variance_weights(mse), 1.0)
+    assert np.allclose(candidates.fitting.inverse_variance_weights(mse), 1.0)

@@ -23,6 +23,11 @@ KINESTHETIC = ROOT / "diagrams" / "inertia_touch.yaml"
 SWEEPS = ROOT / "diagrams" / "sweeps"
 
 
+def in_process_client() -> Client:
+    """One worker thread in this process: cells can be patched, and no process start-up."""
+    return Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address="127.0.0.1:0")
+
+
 def sweep_file(tmp_path, body: str, name: str = "s.yaml") -> Path:
     path = tmp_path / name
     path.write_text(f"scenario: {KINESTHETIC}\n" + body)
@@ -137,7 +142,7 @@ def test_cells_run_into_one_table_resume_and_a_failed_cell_is_a_row(tmp_path, mo
         seen.append(row["cell_id"])
         raise KeyboardInterrupt  # as a user's Ctrl-C after the first cell
 
-    with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address="127.0.0.1:0") as client:
+    with in_process_client() as client:
         with pytest.raises(KeyboardInterrupt):
             run_sweep(sweep, out, client, progress=False, on_row=stop_after_first)
         first = read_table(out)
@@ -188,7 +193,7 @@ def test_bad_arguments_are_one_line_errors(tmp_path, capsys, args, words):
 def test_an_output_under_a_file_is_refused_before_running(tmp_path, capsys):
     path = sweep_file(tmp_path, "duration: 0.2\n")
     (tmp_path / "file").write_text("x")
-    with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address="127.0.0.1:0") as client:
+    with in_process_client() as client:
         with pytest.raises(Exception, match="not a folder|cannot write"):
             run_sweep(load_sweep(path), tmp_path / "file", client, progress=False)
 

@@ -24,13 +24,14 @@ Beyond the paper:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from sustain_drake.identification.rotation import nearest_rotation, project_to_rotation, skew, so3_exp
+from sustain_drake.identification.rotation import nearest_rotation, projection_parts, skew, so3_exp
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     EigenSolution,
@@ -154,9 +155,12 @@ def conditioning_transform(S: np.ndarray, out: np.ndarray | None = None) -> np.n
     ``S = sum A_t^T A_t``, ``S[9,9] = n``, ``S[0,9], S[3,9], S[6,9] = sum p_CP``,
     ``S[0,0] + S[3,3] + S[6,6] = sum |p_CP|^2`` and ``S[9:12, 15] = -sum p_WH``.
     """
-    n = S[9, 9]
-    cx, cy, cz = S[0, 9] / n, S[3, 9] / n, S[6, 9] / n
-    spread2 = (S[0, 0] + S[3, 3] + S[6, 6]) / n - (cx * cx + cy * cy + cz * cz)
+    # Python floats: the same IEEE arithmetic as numpy scalars, at a fraction of the call cost
+    # (numpy scalars when n = 0, which give NaN rather than raise).
+    sums = S.take(_SUMS_FLAT)
+    n, sx, sy, sz, sxx, syy, szz, mpx, mpy, mpz = sums.tolist() if sums[0] != 0.0 else sums
+    cx, cy, cz = sx / n, sy / n, sz / n
+    spread2 = (sxx + syy + szz) / n - (cx * cx + cy * cy + cz * cz)
     s = math.sqrt(spread2) if spread2 > 1e-18 else 1.0
     T = np.zeros((N_UNKNOWNS, N_UNKNOWNS)) if out is None else out
     k = 1.0 / s
@@ -164,10 +168,17 @@ def conditioning_transform(S: np.ndarray, out: np.ndarray | None = None) -> np.n
     # (all over s), with R_WC c_mean = [c_x E, c_y E, c_z E] gamma.
     mx, my, mz = -cx * k, -cy * k, -cz * k
     q = -k / n
-    T.flat[_T_FLAT] = (k, k, k, k, k, k, k, k, k, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, k,
-                       mx, mx, mx, my, my, my, mz, mz, mz,
-                       S[9, 15] * q, S[10, 15] * q, S[11, 15] * q)  # fmt: skip
+    T.put(_T_FLAT, [k, k, k, k, k, k, k, k, k, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, k,
+                    mx, mx, mx, my, my, my, mz, mz, mz,
+                    mpx * q, mpy * q, mpz * q])  # fmt: skip
     return T
+
+
+# Flat indices in S of the sums ``conditioning_transform`` reads (n, sum p_CP, the sums of c_x^2,
+# c_y^2, c_z^2, -sum p_WH).
+_SUMS_FLAT = np.ravel_multi_index(
+    ([9, 0, 3, 6, 0, 3, 6, 9, 10, 11], [9, 9, 9, 9, 0, 3, 6, 15, 15, 15]), (N_UNKNOWNS, N_UNKNOWNS)
+)
 
 
 # Flat indices of T's variable entries: the diagonal, the -c_mean block, the p_mean column.
@@ -288,12 +299,23 @@ class EyeToHandIdentifier(FormulationIdentifier):
 
     def __init__(self, forgetting_factor: float = 1.0, criteria: ConvergenceCriteria | None = None):
         super().__init__(N_UNKNOWNS, forgetting_factor, criteria or default_criteria())
-        self._A = np.zeros((M_ROWS, N_UNKNOWNS))
+        A = self._A = np.zeros((M_ROWS, N_UNKNOWNS))
+        # Views of A_t's (Eq. (35)) sample-dependent entries, so that ``add`` writes them in a few
+        # calls: A[i, 3 k + i] = p_CP[k] (the c_k E blocks, k < 3), -R_WH, -p_WH.
+        step = A.itemsize
+        blocks = np.lib.stride_tricks.as_strided(A, (M_ROWS, 4), ((N_UNKNOWNS + 1) * step, 3 * step))
+        blocks[:, 3] = 1.0  # the E block
+        self._A_c, self._A_R, self._A_p = blocks[:, :3], A[:, 12:15], A[:, 15]
         self._T = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
 
     def add(self, p_CP: np.ndarray, R_WH: np.ndarray, p_WH: np.ndarray) -> None:
         """Adds one sample: the point measured in the camera frame (m) and the hand pose."""
-        self._core.add(build_A(p_CP, R_WH, p_WH, self._A))
+        A_c = self._A_c
+        A_c[0] = p_CP  # row 0 first, so that only a 3-vector fits, then copied to rows 1 and 2
+        A_c[1:] = A_c[0]
+        np.negative(R_WH, out=self._A_R)
+        np.negative(p_WH, out=self._A_p)
+        self._core.add(self._A)
 
     def add_pose(self, p_CP: np.ndarray, X_WH: np.ndarray) -> None:
         """Adds one sample with the hand pose as a 4 x 4 matrix."""
@@ -312,36 +334,51 @@ class EyeToHandIdentifier(FormulationIdentifier):
             refine_estimate: also run the Gauss-Newton refinement (about 10x the cost of the
                 rest of the solve; a streaming system can refine only when it adopts a model).
 
+        Lazy: the solution is computed at the first call after a change of the statistic (or of
+        ``criteria``) and the same object is returned until the next one; the refinement too is
+        run once, when first asked for.
+
         Never raises for degenerate data: too few or too similar samples give a "not converged"
         verdict with the reason.
         """
+        cache = self._cached()
+        if cache is None:
+            cache = self._cache = [self._core._revision, self.criteria, self._solve_tls(), None]
+        solution = cache[2]
+        if not refine_estimate or solution.projected is None:
+            return solution
+        if cache[3] is None:
+            cache[3] = self._refine(solution)
+        return cache[3]
+
+    def _solve_tls(self) -> EyeToHandSolution:
+        """The solution without refinement: the eigen-solve, the SO(3) projection, the verdict."""
         core = self._core
         n = core.num_samples
-        S = core.S_view
-        eigen = core.eigen(conditioning_transform(S, self._T)) if n > 0 else None
+        eigen = core.eigen(conditioning_transform(core._S, self._T)) if n > 0 else None
         if eigen is None:
             reason = "no samples" if n == 0 else "statistic is not finite (overflow)"
             return EyeToHandSolution(None, 0.0, math.inf, math.inf, None, None,
                                      Verdict(False, reason), n)  # fmt: skip
         direction = eigen.direction
-        proj = project_to_rotation(direction[0:9])
-        a = proj.scale
+        R, a, ssd, _ = projection_parts(direction[0:9])
         x = a * direction
-        if a == 0.0 or not math.isfinite(x.sum()):
+        if a == 0.0 or not math.isfinite(sum(x.tolist())):
             verdict = Verdict(False, "the rotation block of v_N is zero: no rotation to identify")
             return EyeToHandSolution(eigen, 0.0, math.inf, math.inf, None, None, verdict, n)
         expected_mse = a * a * eigen.lambda_N
-        projected = EyeToHandEstimate(
-            R_WC=proj.R, p_WC=x[9:12], p_HP=x[12:15], x=x, mean_squared_error=expected_mse
-        )
-        refined = None
-        if refine_estimate:
-            with np.errstate(all="ignore"):  # absurd magnitudes: dropped below, never a NaN out
-                refined = refine(S, core.weight, proj.R, x[9:12].copy(), x[12:15].copy())
-            if not math.isfinite(refined.mean_squared_error + refined.x.sum()):
-                refined = None
-        verdict = judge(self.criteria, n, eigen, math.sqrt(expected_mse), None, proj.ssd, " m")
-        return EyeToHandSolution(eigen, a, proj.ssd, expected_mse, projected, refined, verdict, n)
+        projected = EyeToHandEstimate(R, x[9:12], x[12:15], x, expected_mse)
+        verdict = judge(self.criteria, n, eigen, math.sqrt(expected_mse), None, ssd, " m")
+        return EyeToHandSolution(eigen, a, ssd, expected_mse, projected, None, verdict, n)
+
+    def _refine(self, solution: EyeToHandSolution) -> EyeToHandSolution:
+        """``solution`` with its Gauss-Newton refinement (None if it is not finite)."""
+        core, est = self._core, solution.projected
+        with np.errstate(all="ignore"):  # absurd magnitudes: dropped below, never a NaN out
+            refined = refine(core._S, core.weight, est.R_WC, est.p_WC.copy(), est.p_HP.copy())
+        if not math.isfinite(refined.mean_squared_error + refined.x.sum()):
+            return solution
+        return dataclasses.replace(solution, refined=refined)
 
 
 # ---- several points at once (beyond the paper: the paper identifies from one point) -----------

@@ -131,15 +131,27 @@ class PayloadIdentifier(FormulationIdentifier):
 
         Conditioning: the columns are equilibrated (``T = diag(1/sqrt(C_jj))``), so that the unit
         norm of TLS weighs the mass and the centre-of-mass unknowns alike.
+
+        Lazy: the solution is computed at the first call after a change of the statistic (or of
+        ``criteria``) and the same object is returned until the next one.
         """
+        cache = self._cached()
+        if cache is None:
+            cache = self._cache = [self._core._revision, self.criteria, self._solve_tls(), None]
+        return cache[2]
+
+    def _solve_tls(self) -> PayloadSolution:
         core = self._core
         n = core.num_samples
         none = np.zeros(3)
         if n == 0:
             return PayloadSolution(None, 0.0, none, np.zeros(N_UNKNOWNS), math.inf,
                                    Verdict(False, "no samples"), 0)  # fmt: skip
-        diag = np.diag(core.S_view) / core.weight
-        T = np.diag(1.0 / np.sqrt(np.where(diag > 0.0, diag, 1.0)))
+        # Python floats: the same IEEE arithmetic as numpy's, in fewer calls. (A state set with a
+        # zero weight has no eigen-solution: core.eigen returns None whatever T.)
+        weight = core.weight or math.nan
+        diag = [s_jj / weight for s_jj in core.S_view.diagonal().tolist()]
+        T = np.diag([1.0 / math.sqrt(c_jj if c_jj > 0.0 else 1.0) for c_jj in diag])
         eigen = core.eigen(T)
         if eigen is None:
             return PayloadSolution(None, 0.0, none, np.zeros(N_UNKNOWNS), math.inf,
@@ -147,7 +159,7 @@ class PayloadIdentifier(FormulationIdentifier):
         direction = eigen.direction
         h = direction[4]
         problem = None
-        if abs(h) <= 1e-12 * np.max(np.abs(direction)):
+        if abs(h) <= 1e-12 * max(map(abs, direction.tolist())):
             problem = "the homogeneous entry of v_N is zero: no payload model explains the data"
             x = np.zeros(N_UNKNOWNS)
             mass, expected_mse = 0.0, math.inf

@@ -69,20 +69,27 @@ def project_to_rotation(x9: np.ndarray) -> RotationProjection:
 
         a = sum(s) / sum(s^2),    SSD = ||a R^T X_hat - E||_F^2 = 3 - sum(s)^2 / sum(s^2).
     """
-    X = x9.reshape(3, 3, order="F")
-    U, sv, Vt, info = lapack.dgesvd(X)
+    return RotationProjection(*projection_parts(x9))
+
+
+def projection_parts(x9: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+    """``project_to_rotation``'s ``(R, scale, ssd, sign)`` as a tuple (it runs at every solve of the
+    streaming identifier, so it makes as few Python calls as it can)."""
+    U, sv, Vt, info = lapack.dgesvd(x9.reshape(3, 3, order="F"))
     if info != 0:  # only for non-finite input; keep the contract "R is a rotation"
-        return RotationProjection(R=_E3.copy(), scale=0.0, ssd=float("inf"), sign=1.0)
-    sign = 1.0 if det3(U) * det3(Vt) > 0.0 else -1.0
-    R = U @ Vt
-    if sign < 0.0:
+        return _E3.copy(), 0.0, float("inf"), 1.0
+    R = np.dot(U, Vt)
+    if det3(U) * det3(Vt) > 0.0:
+        sign = 1.0
+    else:
+        sign = -1.0
         R = -R
     s1, s2, s3 = sv.tolist()
     ssum = s1 + s2 + s3
     ssq = s1 * s1 + s2 * s2 + s3 * s3
     if ssq <= 0.0:
-        return RotationProjection(R=R, scale=0.0, ssd=float("inf"), sign=sign)
-    return RotationProjection(R=R, scale=sign * ssum / ssq, ssd=max(3.0 - ssum * ssum / ssq, 0.0), sign=sign)
+        return R, 0.0, float("inf"), sign
+    return R, sign * ssum / ssq, max(3.0 - ssum * ssum / ssq, 0.0), sign
 
 
 def nearest_rotation(M: np.ndarray) -> np.ndarray:

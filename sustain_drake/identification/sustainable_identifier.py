@@ -119,9 +119,10 @@ class EigenSolution:
         """``lambda_{N-1} / lambda_N`` (inf when ``lambda_N`` is zero and ``lambda_{N-1}`` is not)."""
         if self.num_null >= 2:
             return 1.0
-        if self.lambda_N <= 0.0:
+        lambda_N_minus_1, lambda_N = self.eigenvalues[-2:].tolist()
+        if lambda_N <= 0.0:
             return math.inf
-        return self.lambda_N_minus_1 / self.lambda_N
+        return lambda_N_minus_1 / lambda_N
 
 
 def judge(
@@ -192,6 +193,12 @@ class SustainableIdentifier:
         self._state = np.zeros(n2 + 2)
         self._S = self._state[:n2].reshape(self._N, self._N)
         self._weighted = self._state[:-1]
+        # One sample's increment in the same layout, [A^T A | 1 | 1]: ``add`` is one vector sum.
+        self._increment = np.zeros(n2 + 2)
+        self._increment[n2:] = 1.0
+        self._AtA = self._increment[:n2].reshape(self._N, self._N)
+        self._TtS = np.empty((self._N, self._N))  # scratch for T^T S
+        self._revision = 0
 
     # ---- state ----------------------------------------------------------------------------
     @property
@@ -212,6 +219,7 @@ class SustainableIdentifier:
         if state.shape != self._state.shape:
             raise ValueError(f"state must have shape {self._state.shape}, got {state.shape}")
         self._state[:] = state
+        self._revision += 1
 
     @property
     def state_size(self) -> int:
@@ -220,11 +228,18 @@ class SustainableIdentifier:
     def reset(self) -> None:
         """Forgets every sample (the paper's "renew C at the beginning of each identification")."""
         self._state[:] = 0.0
+        self._revision += 1
+
+    @property
+    def revision(self) -> int:
+        """Counts the changes of the state (``add``, ``set_state``, ``reset``): a result computed
+        at one revision is stale at any other."""
+        return self._revision
 
     @property
     def num_samples(self) -> int:
         """Samples added since the last reset (not down-weighted by forgetting)."""
-        return int(round(self._state[-1]))
+        return round(float(self._state[-1]))
 
     @property
     def weight(self) -> float:
@@ -255,21 +270,37 @@ class SustainableIdentifier:
             IdentificationError: ``A`` has the wrong width or is not finite. The state is then
                 unchanged.
         """
-        # One scalar check catches NaN, inf and overflow in A^T A (a NaN or inf makes the sum
-        # non-finite), before anything is committed to the state; numpy's warnings are replaced by
-        # that one clear error.
-        with np.errstate(over="ignore", invalid="ignore"):
-            AtA = A.T @ A
-            total = AtA.sum()
-        if AtA.shape != self._S.shape:
-            raise IdentificationError(f"A_t must have {self._N} columns, got shape {A.shape}")
-        if not math.isfinite(total):
-            raise IdentificationError("sample is not finite (NaN, inf or overflow)")
+        AtA = self._AtA
+        try:
+            # Entries this small cannot make A^T A or its sum overflow (NaN and inf fail the test),
+            # so the usual sample needs neither numpy's error state nor a check of the product.
+            largest = float(np.abs(A).max())
+            small = largest * largest * A.shape[0] * AtA.size < 1e300
+            if small:
+                np.dot(A.T, A, out=AtA)  # float64 with N columns: straight into the buffer
+        except ValueError:  # another dtype or shape, or no rows: the checked path
+            small = False
+        if not small:
+            # One scalar check catches NaN, inf and overflow in A^T A (a NaN or inf makes the sum
+            # non-finite), before anything is committed to the state; numpy's warnings are
+            # replaced by that one clear error.
+            with np.errstate(over="ignore", invalid="ignore"):
+                try:
+                    np.dot(A.T, A, out=AtA)
+                except ValueError:  # another dtype or shape: the general product
+                    product = A.T @ A
+                    if product.shape != AtA.shape:
+                        raise IdentificationError(
+                            f"A_t must have {self._N} columns, got shape {A.shape}"
+                        ) from None
+                    AtA[...] = product
+                total = AtA.sum()
+            if not math.isfinite(total):
+                raise IdentificationError("sample is not finite (NaN, inf or overflow)")
         if self._forgetting != 1.0:
             self._weighted *= self._forgetting
-        self._S += AtA
-        self._state[self._n_index] += 1.0
-        self._state[-1] += 1.0
+        self._state += self._increment  # S += A^T A, n_t += 1, count += 1
+        self._revision += 1
 
     # ---- solving --------------------------------------------------------------------------
     def eigen(self, T: np.ndarray | None = None) -> EigenSolution | None:
@@ -278,25 +309,38 @@ class SustainableIdentifier:
 
         Returns None before any sample, or when the statistic is not finite (overflow).
         """
-        n = self._state[self._n_index]
+        n = float(self._state[self._n_index])
         if n <= 0.0:
             return None
-        C = self._S if T is None else T.T @ self._S @ T
+        if T is None:
+            C, overwrite = self._S, 0
+        else:
+            try:
+                C = np.dot(np.dot(T.T, self._S, out=self._TtS), T)  # the same products as T.T @ S @ T
+            except ValueError:  # T not float64 (or the wrong shape: matmul's own error)
+                C = T.T @ self._S @ T
+            overwrite = 1
         # C is symmetric PSD, so a symmetric eigen-solver is the right tool, not a general SVD.
         # (LAPACK's partial solvers dsyevr/dsyevx for the few smallest are no faster at N = 16.)
         # C is symmetric, so its transpose is the same matrix in Fortran order: no copy for LAPACK.
-        w, V, info = lapack.dsyev(C.T, overwrite_a=1 if T is not None else 0)
-        # Eigenvalues come ascending; NaN anywhere (from a non-finite statistic) reaches the sum.
-        if info != 0 or not math.isfinite(w.sum()):
+        w, V, info = lapack.dsyev(C.T, overwrite_a=overwrite)
+        if info != 0:
             return None
-        w = w[::-1] * (1.0 / n)  # of C = S/n, descending: lambda_1 >= ... >= lambda_N
-        if w[-1] < 0.0:
+        # Eigenvalues come ascending; NaN anywhere (from a non-finite statistic) reaches the sum.
+        ascending = w.tolist()
+        if not math.isfinite(sum(ascending)):
+            return None
+        scale = 1.0 / n
+        w = w[::-1] * scale  # of C = S/n, descending: lambda_1 >= ... >= lambda_N
+        lambda_1, lambda_N_minus_1 = ascending[-1] * scale, ascending[1] * scale
+        if ascending[0] * scale < 0.0:
             w = np.maximum(w, 0.0)  # clip round-off below zero (C is PSD)
+            lambda_1, lambda_N_minus_1 = max(lambda_1, 0.0), max(lambda_N_minus_1, 0.0)
         v_N = V[:, 0]
-        tol = NULL_EIGENVALUE_RTOL * w[0]
-        num_null = 1 if w[-2] > tol else int((w <= tol).sum())
-        direction = v_N if T is None else T @ v_N
-        return EigenSolution(eigenvalues=w, v_N=v_N, direction=direction, num_null=num_null)
+        tol = NULL_EIGENVALUE_RTOL * lambda_1
+        num_null = 1 if lambda_N_minus_1 > tol else int((w <= tol).sum())
+        direction = v_N if T is None else np.dot(T, v_N)
+        return EigenSolution(w, v_N, direction, num_null)
 
     @staticmethod
     def sample_error(A: np.ndarray, x: np.ndarray) -> float:
@@ -315,11 +359,25 @@ class SustainableIdentifier:
 class FormulationIdentifier:
     """Base of the formulations' identifiers: owns a ``SustainableIdentifier`` (``core``) and
     forwards its state handling, so a formulation only adds how a sample becomes ``A_t`` and how
-    ``v_N`` is scaled."""
+    ``v_N`` is scaled.
+
+    Solving is lazy: ``add`` only updates the statistic, and ``solve`` computes a solution on the
+    first call after a change and returns that same object until the core's ``revision`` or
+    ``criteria`` changes (treat it as read-only). A caller that adds many samples and reads once
+    pays one eigen-solve."""
 
     def __init__(self, num_unknowns: int, forgetting_factor: float, criteria: ConvergenceCriteria):
         self._core = SustainableIdentifier(num_unknowns, forgetting_factor)
         self.criteria = criteria
+        # [core revision, criteria, solution, refined solution or None] of the last solve.
+        self._cache: list | None = None
+
+    def _cached(self) -> list | None:
+        """The cache entry if it is still current, else None."""
+        cache = self._cache
+        if cache is not None and cache[0] == self._core._revision and cache[1] is self.criteria:
+            return cache
+        return None
 
     @property
     def core(self) -> SustainableIdentifier:

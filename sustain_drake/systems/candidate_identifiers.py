@@ -239,20 +239,23 @@ class CandidateIdentifiers(LeafSystem):
         sigma = float(self._sigma.Eval(context)[0]) if self._sigma.HasValue(context) else np.inf
         if not sigma > 0:
             sigma = np.inf  # no adopted model yet
-        new = candidates.step(
-            self.bank(context), self._params, self._formulation.criteria, context.get_time(), reset,
-            self._X_WH.Eval(context).GetAsMatrix4(), features.time, features.ids, features.p_CP,
-            features.valid, on_body, reference, self._formulation.forgetting_factor, in_body_cell, sigma,
-            self._depth_gap(context, features.time),
-            self._turn.Eval(context) if self._turn.HasValue(context) else None,
-            float(self._still.Eval(context)[0]) if self._still.HasValue(context) else np.inf,
-            reset_reason=int(self._reset_reason.Eval(context)[0]) if self._reset_reason.HasValue(context)
-            else NO_RESET,
-        )  # fmt: skip
+        still = float(self._still.Eval(context)[0]) if self._still.HasValue(context) else np.inf
+        reason = (int(self._reset_reason.Eval(context)[0]) if self._reset_reason.HasValue(context)
+                  else NO_RESET)
+        frame = candidates.FrameInput(
+            time=context.get_time(), reset=reset, X_WH=self._X_WH.Eval(context).GetAsMatrix4(),
+            frame_time=features.time, ids=features.ids, p_CP=features.p_CP, valid=features.valid,
+            on_body=on_body, reference_x=reference, forgetting_factor=self._formulation.forgetting_factor,
+            in_body_cell=in_body_cell, allowable_error=sigma,
+            depth_gap=self._depth_gap(context, features.time),
+            scene_turn=self._turn.Eval(context) if self._turn.HasValue(context) else None,
+            scene_still_since=still, reset_reason=reason,
+        )
+        new = candidates.step(self.bank(context), self._params, self._formulation.criteria, frame)
         state.get_mutable_abstract_state(self._bank).set_value(new)
 
     def _depth_gap(self, context, features_time: float):
-        """``candidates.step``'s ``depth_gap`` for this frame, None without its depth image."""
+        """``candidates.FrameInput.depth_gap`` for this frame, None without its depth image."""
         if self._depth is None or not self._depth.HasValue(context):
             return None
         depth = self._depth.Eval(context).data

@@ -1,0 +1,141 @@
+"""The leader (paper Fig. 7): the first candidate whose verdict says converged (the smallest expected
+error if several converge on the same frame) is the leader until the next reset; its solution is refined
+(Gauss-Newton) and it is what a ``CoordinationStateMachine`` adopts. Beyond the paper: a second point
+must confirm its camera (``confirm_with_witness``), the camera may be refined jointly with every point
+it explains (``joint``, ``refine_interval``), and a leader whose views do not pin the camera's rotation
+waits for more motion (``min_rotation_lever``, ``min_adopt_rotation_spread``). With no leader, the
+recoveries after a slip and after a camera move may choose one."""
+
+from dataclasses import replace
+
+from sustain_drake.identification.candidates import camera_move_recovery, slip_recovery
+from sustain_drake.identification.candidates.admission import solve
+from sustain_drake.identification.candidates.bank import Adoption, Candidate, CandidateBank
+from sustain_drake.identification.candidates.fitting import (
+    best_p_HP_given_camera,
+    joint_refined,
+    mean_squared_error_of,
+    rotation_spread,
+    smallest_rotation_lever,
+)
+from sustain_drake.identification.candidates.frame import Pool, SeenFrame
+from sustain_drake.identification.candidates.observation import consistent
+from sustain_drake.identification.candidates.params import CandidateParams
+from sustain_drake.identification.eye_to_hand import EyeToHandEstimate, pack_x
+from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, Verdict
+
+# s: a held-back leader's point missing this long is gone, not a flicker of the refiner (a saddle
+# missed for 1-3 frames at 30 Hz; adopting on those took levers of 9 mm, not 15).
+_HELD_UNSEEN_TIME = 0.3
+
+
+def choose(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCriteria, seen: SeenFrame,
+           pool: Pool) -> tuple[Pool, bool, int]:  # fmt: skip
+    """The leader chosen among the pool's candidates when there is none: ``(pool, more_motion, the
+    id of the candidate held back or -1)``, the pool with the leader, its adoption and its
+    ``adopted_mse`` (unchanged when none leads)."""
+    held_back, best = False, None
+    # min_rotation_lever: the leader held back on an earlier frame waits for views only while its
+    # point is seen; once it is not (its face turned away, its track ended: seed 2's converged
+    # points all went within 1 s), the views it waited for are over and it is adopted as it is.
+    held = (next((c for c in pool.kept + pool.archive if c.feature_id == bank.held_back), None)
+            if pool.leader < 0 and bank.held_back >= 0 else None)  # fmt: skip
+    unseen = held is not None and (seen.row.get(held.feature_id) is None
+                                   or seen.time - held.last_sample > _HELD_UNSEEN_TIME)
+    adopt_held = unseen and held.solution.verdict.converged
+    if adopt_held and all(c.feature_id != held.feature_id for c in pool.kept):  # its track ended:
+        # from the archive
+        pool = replace(pool, archive=[c for c in pool.archive if c.feature_id != held.feature_id],
+                       kept=pool.kept + [held])
+    # The first to converge leads (the smallest expected error among simultaneous ones). A leader
+    # held back on an earlier frame is judged again only when a candidate gained a sample: else
+    # the statistics, and so its lever, are as they were.
+    converged = ([] if pool.leader >= 0 or (bank.held_back >= 0 and not pool.fed and not adopt_held)
+                 else [c for c in pool.kept if c.solution.verdict.converged])
+    forgetting_factor = seen.given.forgetting_factor
+    if converged:
+        if adopt_held:
+            best = solve(held, criteria, forgetting_factor, refine=True)
+            confirmed = True  # when it was held back
+        else:
+            best = min(converged, key=lambda c: c.solution.expected_mse)
+            best = solve(best, criteria, forgetting_factor, refine=True)
+            confirmed = _confirmed(best, pool.kept, params, seen)
+        if best.solution.verdict.converged and confirmed:
+            pool, held_back = _adopt(best, params, seen, pool, unseen)
+    elif pool.leader < 0 and params.keep_camera and bank.previous_x is not None:
+        pool = slip_recovery.recover(bank, params, seen, pool)
+    elif pool.leader < 0 and bank.known_points:
+        pool = camera_move_recovery.recover(bank, params, seen, pool)
+    # Once a leader was held back (min_rotation_lever, min_adopt_rotation_spread), more motion is wanted
+    # until one leads or no converged candidate is left (then the detector's trials must find new body
+    # features).
+    first_point = params.motion_min_samples > 0 and not pool.adoptions and any(
+        c.solution.num_samples >= params.motion_min_samples for c in pool.kept)
+    more_motion = pool.leader < 0 and (held_back or first_point or (bank.more_motion and any(
+        c.solution.verdict.converged for c in pool.kept)))
+    held_id = (best.feature_id if held_back
+               else bank.held_back if pool.leader < 0 and held is not None and not unseen else -1)
+    return pool, more_motion, held_id
+
+
+def _adopt(best: Candidate, params: CandidateParams, seen: SeenFrame, pool: Pool,
+           unseen: bool) -> tuple[Pool, bool]:  # fmt: skip
+    """The converged, confirmed candidate ``best`` as the leader (its camera refined jointly with
+    ``joint``), unless its points' views do not pin the camera's rotation: ``(pool, held back)``."""
+    kind, statistics = "identified", [best.statistic]
+    if params.joint:
+        best, statistics = joint_refined(best, pool.kept, pool.archive, params)
+        if len(statistics) > 1:
+            kind = f"identified, camera refined with {len(statistics)} points"
+    lever = smallest_rotation_lever(statistics, best.solution.estimate)
+    # min_rotation_lever, min_adopt_rotation_spread: the points' views must pin the
+    # camera's rotation too.
+    spread = rotation_spread(best.statistic)
+    held_back = (lever < params.min_rotation_lever
+                 or spread < params.min_adopt_rotation_spread) and not unseen
+    if held_back:
+        return pool, True
+    kept = [best if c.feature_id == best.feature_id else c for c in pool.kept]
+    leader = best.feature_id
+    adoptions = pool.adoptions + (Adoption(float(seen.time), leader, best.statistic.copy(),
+                                           best.admitted, pool.round_start, best.solution.estimate,
+                                           kind, lever),)
+    return replace(pool, kept=kept, leader=leader, adopted_mse=best.solution.expected_mse,
+                   adoptions=adoptions), False
+
+
+def _confirmed(c: Candidate, kept, params: CandidateParams, seen: SeenFrame) -> bool:
+    """Whether another candidate's samples agree with ``c``'s camera (with their own ``p_HP``),
+    when ``params.confirm_with_witness`` asks for it: two tracked points of the hand must tell the
+    same camera pose before it is adopted."""
+    if not params.confirm_with_witness:
+        return True
+    probe = CandidateBank(candidates=tuple(kept), leader=c.feature_id, adopted_mse=c.solution.expected_mse)
+    return bool(consistent(probe, params, seen, c.solution.x, exclude=(c.feature_id,)))
+
+
+def refine_adopted(bank: CandidateBank, params: CandidateParams, reference_x, time: float) -> CandidateBank:
+    """``refine_interval``: the adopted camera refined jointly with the leader and every candidate
+    it explains (``joint_refined`` from the adopted camera), offered as a converged solution with
+    the next ``refinement`` counter; unchanged when no other point joins."""
+    bank = replace(bank, last_refinement=time)
+    leader = bank.find(bank.leader)
+    if leader is None:
+        return bank
+    R_WC, p_WC = reference_x[0:9].reshape(3, 3, order="F"), reference_x[9:12].copy()
+    p_HP = best_p_HP_given_camera(leader.statistic, R_WC, p_WC)
+    x = pack_x(R_WC, p_WC, p_HP)
+    mse = mean_squared_error_of(leader.statistic, x)
+    start = EyeToHandEstimate(R_WC, p_WC, p_HP, x, mse)
+    seed = replace(leader, solution=replace(leader.solution, projected=start, refined=start,
+                                            expected_mse=max(mse, bank.adopted_mse)))
+    refined, statistics = joint_refined(seed, bank.candidates, bank.archive, params)
+    num_points = len(statistics)
+    if num_points < 2:
+        return bank
+    estimate = refined.solution.estimate
+    verdict = Verdict(True, f"the adopted model refined jointly with {num_points - 1} other points")
+    solution = replace(refined.solution, expected_mse=estimate.mean_squared_error, verdict=verdict,
+                       refinement=bank.refinement + 1)
+    return replace(bank, refined_solution=solution, refinement=bank.refinement + 1)

@@ -1,0 +1,86 @@
+"""The per-frame tick of the candidates (paper Fig. 7): the reset, the hand pose, then, on a new frame,
+admission, feeding, loss, the leader and the observation."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from sustain_drake.identification.candidates.admission import gather
+from sustain_drake.identification.candidates.bank import CandidateBank, mark_verified, pose_at, record_pose
+from sustain_drake.identification.candidates.camera_move_recovery import model_points, with_scene_turn
+from sustain_drake.identification.candidates.fitting import x_is_set
+from sustain_drake.identification.candidates.frame import FrameInput, SeenFrame
+from sustain_drake.identification.candidates.leader import choose, refine_adopted
+from sustain_drake.identification.candidates.observation import observe
+from sustain_drake.identification.candidates.params import CandidateParams
+from sustain_drake.identification.coordination import CAMERA_MOVED
+from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria
+
+
+def step(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCriteria,
+         frame: FrameInput) -> CandidateBank:  # fmt: skip
+    """One tick at ``frame.time``: the reset, the hand pose, then (on a new frame) admission, feeding,
+    loss, the leader and the observation. Returns the new bank."""
+    if frame.reset != bank.last_reset:
+        bank = _after_reset(bank, params, frame)
+    bank = record_pose(bank, frame.time, frame.X_WH)
+    bank = with_scene_turn(bank, frame.scene_turn)
+    reference_x = frame.reference_x
+    if bank.leader >= 0 and x_is_set(reference_x):
+        bank = replace(bank, model_x=np.array(reference_x, dtype=float))
+    if not frame.frame_time > bank.last_frame:
+        return bank  # no new frame (or none yet)
+    X_frame = pose_at(bank, frame.frame_time, params.pose_tolerance)
+    if X_frame is None:
+        return replace(bank, last_frame=float(frame.frame_time))  # no pose for that frame: skip it
+    seen = SeenFrame.of(frame, X_frame, params)
+    pool = gather(bank, params, criteria, seen)
+    pool, more_motion, held_id = choose(bank, params, criteria, seen, pool)
+    leader, frame_time = pool.leader, seen.time
+    # Before a leader, a frame that fed any identifier counts as a sample (the state machine
+    # checks a solution's samples against the count since a reset); after, observations count.
+    count = bank.sample_count + (1 if pool.fed and bank.leader < 0 else 0)
+    new_leader = leader != bank.leader
+    bank = replace(bank, candidates=tuple(pool.kept), leader=leader, rejected=pool.rejected,
+                   round_start=pool.round_start, sample_count=count, archive=tuple(pool.archive),
+                   last_frame=float(frame_time), adoptions=pool.adoptions,
+                   observed=bank.observed if leader == bank.leader else leader,
+                   observed_last=bank.observed_last if leader == bank.leader else None,
+                   observed_p_HP=bank.observed_p_HP if leader == bank.leader else None,
+                   witness=bank.witness if leader == bank.leader else -1,
+                   adopted_mse=pool.adopted_mse, more_motion=more_motion, held_back=held_id)
+    if new_leader:
+        bank = replace(bank, refined_solution=None, last_refinement=float(frame_time))
+        if leader >= 0:
+            bank = mark_verified(bank)  # the candidates the new model was identified among
+    elif (leader >= 0 and params.refine_interval > 0 and x_is_set(reference_x)
+          and frame_time - bank.last_refinement >= params.refine_interval):
+        bank = refine_adopted(bank, params, reference_x, float(frame_time))
+    return observe(bank, params, seen)
+
+
+def _after_reset(bank: CandidateBank, params: CandidateParams, frame: FrameInput) -> CandidateBank:
+    """A new reset value: every candidate dropped. The adopted model is kept as the previous camera
+    (``keep_camera``) unless the camera moved; after a camera move, with ``keep_tool_points``, its
+    points are kept with their ``p_HP`` (``known_points``)."""
+    time, reference_x = frame.time, frame.reference_x
+    camera_moved = frame.reset_reason == CAMERA_MOVED
+    previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) and not camera_moved else None
+    known = () if previous is not None else bank.known_points
+    # The camera before a move whose turn has not come yet: the resets that follow while the
+    # camera still moves (no leader in between) keep it; one after the turn is a new change.
+    moved_from, moved_at = (bank.moved_from_x, bank.moved_at) if bank.turn is None else (None, math.nan)
+    if camera_moved and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
+        known = model_points(bank, params)  # the model cleared: the camera moved, the tool did not
+        moved_from, moved_at = bank.model_x, float(time)
+    elif previous is not None or bank.leader >= 0:
+        moved_from, moved_at = None, math.nan
+    return replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
+                   known_points=known, model_x=None, moved_from_x=moved_from, moved_at=moved_at,
+                   turn=None, turned_R_WC=None, turned_p_WC=None, reset_time=float(time),
+                   last_reset=float(frame.reset), round_start=math.nan,
+                   observed_last=None, observed_p_HP=None,
+                   witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
+                   observers=(), refined_solution=None, last_refinement=-math.inf, more_motion=False,
+                   held_back=-1)
