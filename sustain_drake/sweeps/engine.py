@@ -135,9 +135,9 @@ def run_sweep(sweep: Sweep, out: str | Path, client, *, retry_failed: bool = Fal
                       str(folder.resolve()))
         futures[client.submit(run_cell, job, key=f"cell-{cell.id}", pure=False)] = cell
     rows = {} if table.empty else {r["cell_id"]: r for r in table.to_dict("records")}
-    bar = tqdm(total=len(pending), unit="cell", disable=not progress, smoothing=0.0,
-               desc=f"{sweep.path.name}: {len(sweep.cells) - len(pending)} of {len(sweep.cells)} "
-                    "cells done")
+    # The bar counts every cell of the sweep; those already in the table start it.
+    bar = tqdm(total=len(sweep.cells), initial=len(sweep.cells) - len(pending), unit="cell",
+               disable=not progress, smoothing=0.0, desc=sweep.path.name)
     try:
         for future in as_completed(futures):
             cell = futures.pop(future)
