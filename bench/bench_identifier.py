@@ -23,11 +23,16 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # one core, before numpy loa
 import argparse  # noqa: E402
 import json  # noqa: E402
 import statistics  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy.linalg import lapack  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from results_page import publish  # noqa: E402  (bench/results_page.py)
 
 from sustain_drake.identification import EyeToHandIdentifier, PayloadIdentifier  # noqa: E402
 from sustain_drake.identification.eye_to_hand import conditioning_transform, refine  # noqa: E402
@@ -50,6 +55,7 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=500)
     parser.add_argument("--lazy", type=int, default=10, help="samples per read in the lazy row")
     parser.add_argument("--json", help="also write the figures to this file")
+    parser.add_argument("--results", action="store_true", help="also write the table on docs/results.md")
     args = parser.parse_args()
     try:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -156,6 +162,32 @@ def main() -> None:
     if args.json:
         with open(args.json, "w") as f:
             json.dump(figures, f, indent=2)
+    if args.results:
+        publish("bench_identifier", results_table(figures, args.lazy))
+
+
+# Result-page rows: figure -> what it measures.
+ROWS = {
+    "lapack_dsyev_16x16_us": "LAPACK `dsyev` 16 x 16 alone (through scipy)",
+    "lapack_dsyev_16x16_conditioned_us": "`dsyev` on the conditioned matrix the solve factorises",
+    "eye_to_hand_add_us": "eye-to-hand add",
+    "eye_to_hand_add_solve_us": "eye-to-hand add + solve after every sample (eigen-solve, SO(3) projection, "
+                                "verdict), N = 16",
+    "eye_to_hand_add_lazy_us": "eye-to-hand, {lazy} adds then one read, per sample",
+    "eye_to_hand_solve_cached_us": "a read with no new sample (the cached solution)",
+    "eye_to_hand_floor_us": "the numpy/LAPACK calls of one add + solve alone (no package code around them)",
+    "payload_add_solve_us": "payload add + solve, N = 5",
+    "eye_to_hand_refinement_us": "eye-to-hand Gauss-Newton refinement from the statistic",
+}
+
+
+def results_table(figures: dict, lazy: int) -> list[str]:
+    dsyev = figures["lapack_dsyev_16x16_us"]
+    lines = ["| what | median |", "|---|---|"]
+    for key, text in ROWS.items():
+        ratio = "" if key == "lapack_dsyev_16x16_us" else f" ({figures[key] / dsyev:.2f}x `dsyev`)"
+        lines.append(f"| {text.format(lazy=lazy)} | {figures[key]:.1f} us{ratio} |")
+    return lines
 
 
 if __name__ == "__main__":

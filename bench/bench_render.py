@@ -49,7 +49,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import publish  # noqa: E402  (bench/common.py)
+from results_page import publish  # noqa: E402  (bench/results_page.py)
 
 SCENARIO = Path(__file__).resolve().parents[1] / "diagrams" / "hand_eye.yaml"
 

@@ -20,7 +20,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, publish, select_cells  # noqa: E402
+from common import ROOT, select_cells  # noqa: E402
+from results_page import publish  # noqa: E402
 
 from sustain_drake.sweeps import load_sweep, open_client, run_sweep  # noqa: E402
 

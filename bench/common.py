@@ -6,20 +6,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import shlex
-import sys
-import time
 from pathlib import Path
 
 import pandas as pd
+from results_page import publish  # bench/results_page.py
 
 from sustain_drake.experiments.targets import TARGETS
-from sustain_drake.files import write_atomically
-from sustain_drake.provenance import source_commit
 from sustain_drake.sweeps import Sweep, load_sweep, open_client, run_sweep, write_summary
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS_PAGE = ROOT / "docs" / "results.md"
 
 
 def sweep_arguments(description: str, sweep: str, out: str) -> argparse.ArgumentParser:
@@ -110,25 +105,3 @@ def bench_main(argv, doc: str, sweep: str, experiment: str, columns: list[str], 
     if args.results:
         publish(f"bench_{experiment}", lines)
     return 0
-
-
-def publish(section: str, lines: list[str], page: Path = RESULTS_PAGE) -> None:
-    """Replaces the block ``section`` of the results page (between ``<!-- BEGIN section -->`` and
-    ``<!-- END section -->``) with ``lines``, the command that made them and the commit it ran on
-    (local changes to code say so). The page's prose around the block is kept."""
-    text = page.read_text(encoding="utf-8")
-    begin, end = f"<!-- BEGIN {section} -->", f"<!-- END {section} -->"
-    if begin not in text or end not in text:
-        raise SystemExit(f"{page}: no block {section} (add the markers {begin} ... {end})")
-    command = " ".join(["python", *[shlex.quote(a) for a in [_relative(sys.argv[0]), *sys.argv[1:]]]])
-    block = [begin, "", f"Command: `{command}`; commit `{source_commit()}`, {time.strftime('%Y-%m-%d')}.", "",
-             *lines, "", end]
-    head, rest = text.split(begin, 1)
-    write_atomically(page, head + "\n".join(block) + rest.split(end, 1)[1])
-
-
-def _relative(path: str) -> str:
-    try:
-        return str(Path(path).resolve().relative_to(ROOT))
-    except ValueError:
-        return path
