@@ -182,3 +182,29 @@ def test_estimate_visualizer_draws_the_estimate_beside_the_truth():
     matrix = np.array([np.frombuffer(packed[start + 9 * i + 1:start + 9 * (i + 1)], ">f8")[0]
                        for i in range(16)])
     assert np.allclose(matrix[12:15], [0.4, 0.0, 0.8])
+
+
+def test_a_cloned_context_keeps_its_own_tracker_and_candidate_states():
+    """The tracker's and the candidates' states are shared between a context and its clone (no
+    deep copy per update): advancing one must leave the other's as it was."""
+    import pickle
+
+    scenario = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
+    builder = DiagramBuilder()
+    station = builder.AddSystem(build_station(scenario))
+    handle = hand_eye.add_to_diagram(builder, station, scenario, None)
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(0.4)
+    context = simulator.get_context()
+    clone = context.Clone()
+
+    def states(ctx):
+        tracker = handle.tracker.tracker_state(handle.tracker.GetMyContextFromRoot(ctx))
+        bank = handle.candidates.bank(handle.candidates.GetMyContextFromRoot(ctx))
+        return pickle.dumps(tracker), pickle.dumps(bank)
+
+    before = states(clone)
+    simulator.AdvanceTo(0.8)
+    assert states(context) != before  # the original moved on
+    assert states(clone) == before

@@ -111,6 +111,16 @@ def test_state_vector_round_trip_and_copy_are_deep():
         CoincidenceState.from_vector(v[:-1], 1, 1)
 
 
+def test_from_vector_gives_every_field_its_shape_and_own_memory():
+    fresh = CoincidenceState(3, 5)
+    v = np.arange(CoincidenceState.size(3, 5), dtype=float)
+    s = CoincidenceState.from_vector(v, 3, 5)
+    for name in CoincidenceState.__slots__[2:]:
+        assert getattr(s, name).shape == getattr(fresh, name).shape, name
+        assert not np.shares_memory(getattr(s, name), v)
+    assert (s.n_a, s.n_c) == (3, 5) and np.array_equal(s.to_vector(), v)
+
+
 def test_bad_inputs_raise_one_line_value_errors():
     s = step(CoincidenceState(2, 3), 0.1, np.zeros(2), np.zeros(3))
     with pytest.raises(ValueError, match="finite"):

@@ -1,5 +1,7 @@
 """Drift-free points of tracked features (perception.point_refinement) on synthetic images."""
 
+import warnings
+
 import cv2
 import numpy as np
 import pytest
@@ -7,6 +9,7 @@ import pytest
 from sustain_drake.perception.optical_flow import PinholeIntrinsics
 from sustain_drake.perception.point_refinement import (
     RefinementParams,
+    _row_nanmedian,
     central_symmetry,
     local_depth,
     refine_points,
@@ -232,3 +235,15 @@ def test_with_the_symmetry_test_only_saddles_are_points():
     tracked = np.array([[SADDLE[0] + 2.0, SADDLE[1] - 2.0]])
     p_CP, valid, p_px = refine_points(checker_image(), depth, tracked, K, params, return_pixels=True)
     assert valid[0] and np.linalg.norm(p_px[0] - SADDLE) < 0.15
+
+
+@pytest.mark.parametrize("rows", [0, 1, 7, 300])
+def test_row_nanmedian_is_numpys_nanmedian_bit_for_bit(rows):
+    rng = np.random.default_rng(rows)
+    window = rng.choice([0.5, 0.7, 0.71, 1.3], size=(rows, 25)) + rng.normal(0, 1e-3, (rows, 25))
+    window[rng.random(window.shape) < rng.random((rows, 1))] = np.nan  # some rows mostly NaN
+    window[:1] = np.nan  # an all-NaN row: NaN
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # numpy's "All-NaN slice encountered"
+        expected = np.nanmedian(window, axis=1)
+    assert _row_nanmedian(window).tobytes() == expected.tobytes()

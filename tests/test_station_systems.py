@@ -99,6 +99,17 @@ def test_camera_sampler_noise_is_reproducible_and_optional():
     assert all(np.all(d == 2.0) for _, d in exact)
 
 
+def test_depth_noise_into_a_given_array_is_the_same_image():
+    z = np.linspace(0.2, 4.0, 12 * 16, dtype=np.float32).reshape(12, 16, 1)
+    z[0, :3, 0] = [0.0, np.inf, -1.0]
+    noise = DepthNoiseModel()
+    out = np.empty_like(z)
+    expected = noise.apply(z, np.random.default_rng([5, 7]))
+    assert noise.apply(z, np.random.default_rng([5, 7]), out=out) is out
+    assert out.tobytes() == expected.tobytes()
+    assert out[0, 0, 0] == 0.0 and out[0, 1, 0] == np.inf and out[0, 2, 0] == 0.0
+
+
 def test_camera_sampler_rejects_bad_arguments():
     with pytest.raises(ValueError):
         RgbdCameraSampler(0.0)

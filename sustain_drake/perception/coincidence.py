@@ -112,6 +112,7 @@ system can keep it as discrete state.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -238,6 +239,18 @@ _FIELDS = (
 )
 
 
+@functools.cache
+def _layout(n_a: int, n_c: int) -> tuple[tuple, int]:
+    """The flat-vector layout of ``_FIELDS``: ``((name, start, stop, shape), ...)`` and the size."""
+    layout, k = [], 0
+    for name, shape in _FIELDS:
+        shp = shape(n_a, n_c)
+        n = int(np.prod(shp, dtype=int))
+        layout.append((name, k, k + n, shp))
+        k += n
+    return tuple(layout), k
+
+
 class CoincidenceState:
     """Per-actuator / per-cell state of the detector: plain float arrays, one per field.
 
@@ -260,7 +273,7 @@ class CoincidenceState:
 
     @staticmethod
     def size(n_a: int, n_c: int) -> int:
-        return int(sum(np.prod(shape(n_a, n_c), dtype=int) for _, shape in _FIELDS))
+        return _layout(n_a, n_c)[1]
 
     def to_vector(self) -> np.ndarray:
         return np.concatenate([np.ravel(getattr(self, name)) for name, _ in _FIELDS])
@@ -268,16 +281,18 @@ class CoincidenceState:
     @staticmethod
     def from_vector(vector: np.ndarray, n_a: int, n_c: int) -> CoincidenceState:
         v = np.asarray(vector, dtype=float).ravel()
-        if v.size != CoincidenceState.size(n_a, n_c):
+        layout, size = _layout(n_a, n_c)
+        if v.size != size:
             raise ValueError(f"state vector has {v.size} entries, expected "
-                             f"{CoincidenceState.size(n_a, n_c)} for {n_a} actuators, {n_c} cells")
-        s = CoincidenceState(n_a, n_c)
-        k = 0
-        for name, shape in _FIELDS:
-            shp = shape(n_a, n_c)
-            n = int(np.prod(shp, dtype=int))
-            setattr(s, name, v[k:k + n].reshape(shp).copy())
-            k += n
+                             f"{size} for {n_a} actuators, {n_c} cells")
+        if n_a <= 0 or n_c <= 0:
+            raise ValueError(f"need at least one actuator and one cell, got {n_a}, {n_c}")
+        # Every field set from the vector: no zero-filled arrays first (a Drake system decodes
+        # its state several times per frame).
+        s = object.__new__(CoincidenceState)
+        s.n_a, s.n_c = int(n_a), int(n_c)
+        for name, start, stop, shape in layout:
+            setattr(s, name, v[start:stop].reshape(shape).copy())
         return s
 
     def copy(self) -> CoincidenceState:

@@ -25,6 +25,11 @@ class _DetectorState:
     q: np.ndarray | None = None
     t: float = 0.0
 
+    def __deepcopy__(self, memo):
+        # Immutable (an update stores a new one, q a new array), so a copy shares it: Drake
+        # copies abstract state twice per update, and on every context clone.
+        return self
+
 
 class CameraMotionDetector(LeafSystem):
     """Declares a camera move when the static scene moves coherently in the image

@@ -69,7 +69,7 @@ class RgbdCameraSampler(LeafSystem):
                 frame = int(np.floor(t * self._fps + 1e-6))
                 rng = np.random.default_rng([self._seed, frame])
                 noisy = ImageDepth32F(image.width(), image.height())
-                noisy.mutable_data[:] = self._noise.apply(image.data, rng)
+                self._noise.apply(image.data, rng, out=noisy.mutable_data)  # straight into the image
                 image = noisy
             state.get_mutable_abstract_state(int(self._states[name])).set_value(image)
         state.get_mutable_discrete_state(self._time).set_value([t])

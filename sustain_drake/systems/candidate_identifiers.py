@@ -22,6 +22,7 @@ from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.perception.point_refinement import RefinementParams, refine_points
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
 from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
+from sustain_drake.systems.shared_state import Shared
 from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation, declare_solution_outputs
 
 
@@ -153,7 +154,7 @@ class CandidateIdentifiers(LeafSystem):
     chosen, a reset, or no converged candidate is left; else 0: the hand should move more (connect
     an ``IdentifyingMotion``'s ``more_motion``).
 
-    State: the ``CandidateBank`` (abstract, immutable: contexts clone), updated every ``period``
+    State: the ``CandidateBank`` (abstract, immutable: a cloned context shares it), updated every ``period``
     s (a periodic unrestricted update at the camera's rate).
     """
 
@@ -185,7 +186,7 @@ class CandidateIdentifiers(LeafSystem):
             self._depth = self.DeclareAbstractInputPort("depth_image", AbstractValue.Make(ImageDepth32F()))
             self._time = self.DeclareVectorInputPort("image_time", 1)
         self._empty = candidates.empty_solution(self._formulation.criteria)
-        self._bank = self.DeclareAbstractState(AbstractValue.Make(CandidateBank()))
+        self._bank = self.DeclareAbstractState(AbstractValue.Make(Shared(CandidateBank())))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
         declare_solution_outputs(self, N_UNKNOWNS, self.solution)
@@ -199,7 +200,10 @@ class CandidateIdentifiers(LeafSystem):
             lambda c, o: o.set_value(self.solution(c)), prerequisites_of_calc={self.all_state_ticket()},
         )  # fmt: skip
         self._formulation.declare_outputs(self, self.solution)
-        self.DeclareStateOutputPort("candidates", self._bank)
+        self.DeclareAbstractOutputPort(
+            "candidates", lambda: AbstractValue.Make(CandidateBank()), lambda c, o: o.set_value(self.bank(c)),
+            prerequisites_of_calc={self.abstract_state_ticket(self._bank)},
+        )  # fmt: skip
         self.DeclareVectorOutputPort(
             "more_motion", 1, lambda c, o: o.SetFromVector([float(self.bank(c).more_motion)]),
             prerequisites_of_calc={self.all_state_ticket()},
@@ -210,7 +214,7 @@ class CandidateIdentifiers(LeafSystem):
         return self._params
 
     def bank(self, context) -> CandidateBank:
-        return context.get_abstract_state(self._bank).get_value()
+        return context.get_abstract_state(self._bank).get_value().value
 
     def solution(self, context):
         """The shown candidate's solution (an empty one before any candidate). Only a leader's
@@ -252,7 +256,7 @@ class CandidateIdentifiers(LeafSystem):
             scene_still_since=still, reset_reason=reason,
         )
         new = candidates.step(self.bank(context), self._params, self._formulation.criteria, frame)
-        state.get_mutable_abstract_state(self._bank).set_value(new)
+        state.get_mutable_abstract_state(self._bank).set_value(Shared(new))
 
     def _depth_gap(self, context, features_time: float):
         """``candidates.FrameInput.depth_gap`` for this frame, None without its depth image."""

@@ -23,17 +23,21 @@ class DepthNoiseModel:
     def sigma(self, z: np.ndarray) -> np.ndarray:
         return self.a + self.b * (z - self.z0) ** 2
 
-    def apply(self, depth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """A noisy copy of ``depth`` (m). Pixels without a return (0 or +inf, Drake's too-near
-        and too-far values) are kept; a noisy return stays in front of the camera."""
+    def apply(self, depth: np.ndarray, rng: np.random.Generator, out: np.ndarray | None = None) -> np.ndarray:
+        """A noisy copy of ``depth`` (m), written into ``out`` (float32, C-contiguous, the shape of
+        ``depth``) when given. Pixels without a return (0 or +inf, Drake's too-near and too-far
+        values) are kept; a noisy return stays in front of the camera."""
         z = np.asarray(depth, dtype=np.float32)
-        # Whole-image float32 arithmetic (no boolean indexing): about 3x faster per frame.
+        noisy = np.empty(z.shape, np.float32) if out is None else out
+        rng.standard_normal(dtype=np.float32, out=noisy)  # the same draws as standard_normal(z.shape)
+        # Whole-image float32 arithmetic, in place (no boolean indexing).
         # The clip keeps sigma finite at z = +inf, so inf + noise stays inf (not NaN).
-        offset = (np.minimum(z, np.float32(1e3)) - np.float32(self.z0)) ** 2
-        offset *= np.float32(self.b)
-        offset += np.float32(self.a)
-        noisy = rng.standard_normal(z.shape, dtype=np.float32)
-        noisy *= offset
+        sigma = np.minimum(z, np.float32(1e3))
+        sigma -= np.float32(self.z0)
+        np.square(sigma, out=sigma)
+        sigma *= np.float32(self.b)
+        sigma += np.float32(self.a)
+        noisy *= sigma
         noisy += z
         np.maximum(noisy, np.float32(1e-4), out=noisy)
         noisy[z <= 0] = 0.0

@@ -40,6 +40,13 @@ class DistractorPath(LeafSystem):
         if len(self._lengths) == 0:
             raise ValueError("waypoints must not all coincide")
         self._cumulative = np.concatenate([[0.0], np.cumsum(self._lengths)])
+        # Per segment, what state_at needs (evaluated at every physics step): its start, direction
+        # and heading as Python floats, computed as state_at computed them per call.
+        self._segments = []
+        for start, step, length in zip(self._starts, self._steps, self._lengths, strict=True):
+            direction = step / length
+            self._segments.append((float(start[0]), float(start[1]), float(direction[0]),
+                                   float(direction[1]), float(np.arctan2(direction[1], direction[0]))))
         self._speed = float(speed)
         self._start_time = float(start_time)
         self._loop = bool(loop)
@@ -55,13 +62,12 @@ class DistractorPath(LeafSystem):
             distance = distance % total
         elif distance >= total:
             distance, moving = total, False
-        i = int(np.clip(np.searchsorted(self._cumulative, distance, side="right") - 1,
-                        0, len(self._lengths) - 1))
-        direction = self._steps[i] / self._lengths[i]
-        p = self._starts[i] + direction * (distance - self._cumulative[i])
-        yaw = float(np.arctan2(direction[1], direction[0]))
-        v = direction * self._speed if moving else np.zeros(2)
-        return np.array([p[0], p[1], yaw, v[0], v[1], 0.0])
+        i = min(max(int(np.searchsorted(self._cumulative, distance, side="right")) - 1, 0),
+                len(self._lengths) - 1)
+        x0, y0, dx, dy, yaw = self._segments[i]
+        along = distance - float(self._cumulative[i])
+        v = (dx * self._speed, dy * self._speed) if moving else (0.0, 0.0)
+        return np.array([x0 + dx * along, y0 + dy * along, yaw, v[0], v[1], 0.0])
 
     def _calc(self, context, output) -> None:
         output.SetFromVector(self.state_at(context.get_time()))

@@ -86,20 +86,21 @@ class GroundTruth(LeafSystem):
     def _X_W(self, context, body: int) -> RigidTransform:
         return self._poses.Eval(context)[body]
 
-    def _X_KW(self, context) -> RigidTransform:
-        return (self._X_W(context, self._hand) @ self._X_HK).inverse()
+    def _X_KW(self, poses: list) -> RigidTransform:
+        return (poses[self._hand] @ self._X_HK).inverse()
 
     def _calc_p_HP(self, context, output) -> None:
-        X_HT = self._X_W(context, self._hand).inverse() @ self._X_W(context, self._tool_body)
+        poses = self._poses.Eval(context)  # once: each Eval converts every body's pose to Python
+        X_HT = poses[self._hand].inverse() @ poses[self._tool_body]
         output.SetFromVector(X_HT @ self._p_TP)
 
     def _com_in_K(self, context, masses: list[PointMass]) -> np.ndarray:
         total = sum(b.mass for b in masses)
         if total <= 0:
             return np.zeros(3)
-        X_KW = self._X_KW(context)
-        weighted = sum(b.mass * (X_KW @ self._X_W(context, b.body_index) @ np.asarray(b.p_BCm))
-                       for b in masses)
+        poses = self._poses.Eval(context)
+        X_KW = self._X_KW(poses)
+        weighted = sum(b.mass * (X_KW @ poses[b.body_index] @ np.asarray(b.p_BCm)) for b in masses)
         return weighted / total
 
     def _calc_p_KCm(self, context, output) -> None:

@@ -19,6 +19,7 @@ from sustain_drake.perception.optical_flow import (
     TrackerState,
     track_frame,
 )
+from sustain_drake.systems.shared_state import Shared
 
 
 def intrinsics_from_camera_info(camera_info: CameraInfo) -> PinholeIntrinsics:
@@ -88,8 +89,9 @@ class OpticalFlowTracker(LeafSystem):
         self._depth = self.DeclareAbstractInputPort(
             "depth_image", AbstractValue.Make(ImageDepth32F()))
         self._time = self.DeclareVectorInputPort("image_time", 1)
+        # Shared: track_frame returns a new state and never modifies its input.
         self._state_index = self.DeclareAbstractState(
-            AbstractValue.Make(TrackerState.initial(self._grid)))
+            AbstractValue.Make(Shared(TrackerState.initial(self._grid))))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update)
         self.DeclareVectorOutputPort(
             "visual_change", BasicVector(self._grid.num_cells), self._calc_visual_change,
@@ -108,7 +110,7 @@ class OpticalFlowTracker(LeafSystem):
 
     def tracker_state(self, context) -> TrackerState:
         """The tracker's state in ``context`` (read only)."""
-        return context.get_abstract_state(self._state_index).get_value()
+        return context.get_abstract_state(self._state_index).get_value().value
 
     def _update(self, context, state):
         color = self._color.Eval(context)
@@ -119,7 +121,7 @@ class OpticalFlowTracker(LeafSystem):
             t = context.get_time()
         new = track_frame(self.tracker_state(context), color.data, depth, t, self._intrinsics,
                           self._grid, self._params)
-        state.get_mutable_abstract_state(self._state_index).set_value(new)
+        state.get_mutable_abstract_state(self._state_index).set_value(Shared(new))
 
     def _calc_visual_change(self, context, output):
         output.SetFromVector(self.tracker_state(context).sdot)
