@@ -1,7 +1,9 @@
 """Reading recorded calibration data from CSV files and writing results as YAML (no pydrake).
 
-CSV formats (one header row; blank lines and lines starting with ``#`` are ignored; row i of the
-points file goes with row i of the poses file):
+CSV formats (UTF-8 text, a byte-order mark allowed, at most ``MAX_FILE_BYTES``; one header row;
+blank lines and lines starting with ``#`` are ignored; row i of the points file goes with row i of
+the poses file; coordinates within ``MAX_ABS_POSITION_M``, angles within ``MAX_ABS_ANGLE_RAD``;
+anything else raises ``RecordedDataError`` with a one-line message):
 
 - points: ``x,y,z`` -- the tracked point in the camera frame C, metres (camera frame as in Drake
   and OpenCV: +z forward along the optical axis, +x right, +y down in the image).
@@ -17,7 +19,9 @@ The YAML result holds ``X_WC`` in Drake's ``schema.Transform`` form (``translati
 
 from __future__ import annotations
 
+import codecs
 import csv
+import io
 import math
 from pathlib import Path
 
@@ -34,15 +38,52 @@ class RecordedDataError(ValueError):
     """A file that cannot be used; the message is one line naming the file (and row)."""
 
 
-def _read_table(path: str | Path, formats: tuple[tuple[str, ...], ...]) -> tuple[tuple[str, ...], np.ndarray]:
-    path = Path(path)
+# Limits that keep a read bounded and catch unit mistakes (both stated in docs/identification.md).
+MAX_FILE_BYTES = 100_000_000
+MAX_ABS_POSITION_M = 1000.0  # a larger coordinate is surely millimetres, not metres
+MAX_ABS_ANGLE_RAD = 2 * math.pi  # a larger roll, pitch or yaw is surely degrees, not radians
+
+
+def _shown(cells) -> str:
+    """Cells as the user wrote them, on one line and at most 60 characters."""
+    text = ",".join(cells)
+    text = text if text.isprintable() else repr(text)[1:-1]
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _read_text(path: Path) -> str:
     try:
-        text = path.read_text()
+        with open(path, "rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
     except OSError as e:
         raise RecordedDataError(f"{path}: cannot read: {e.strerror or e}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise RecordedDataError(f"{path}: larger than {MAX_FILE_BYTES // 1_000_000} MB: not a recorded CSV")
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)) or b"\x00" in data:
+        raise RecordedDataError(f"{path}: a binary or UTF-16 file, not a text CSV: save it as UTF-8")
+    body = data.removeprefix(codecs.BOM_UTF8)  # a leading byte-order mark (as Excel writes) is dropped
+    try:
+        return body.decode("utf-8")
+    except UnicodeDecodeError as e:
+        at = e.start + len(data) - len(body)
+        raise RecordedDataError(
+            f"{path}: not UTF-8 text (byte {at + 1} is {data[at]:#04x}): save it as UTF-8"
+        ) from None
+
+
+def _read_table(path: str | Path, formats: tuple[tuple[str, ...], ...]) -> tuple[tuple[str, ...], np.ndarray]:
+    path = Path(path)
+    reader = csv.reader(io.StringIO(_read_text(path), newline=""))
     rows = []
     header = None
-    for line_no, row in enumerate(csv.reader(text.splitlines()), start=1):
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            break
+        except csv.Error as e:
+            raise RecordedDataError(f"{path}:{reader.line_num}: not a CSV row ({e})") from None
+        line_no = reader.line_num
         cells = [c.strip() for c in row]
         if not cells or all(c == "" for c in cells) or cells[0].startswith("#"):
             continue
@@ -50,7 +91,7 @@ def _read_table(path: str | Path, formats: tuple[tuple[str, ...], ...]) -> tuple
             header = tuple(c.lower() for c in cells)
             if header not in formats:
                 wanted = " or ".join(",".join(f) for f in formats)
-                raise RecordedDataError(f"{path}:{line_no}: header is '{','.join(cells)}', expected {wanted}")
+                raise RecordedDataError(f"{path}:{line_no}: header is '{_shown(cells)}', expected {wanted}")
             continue
         if len(cells) != len(header):
             raise RecordedDataError(
@@ -59,13 +100,26 @@ def _read_table(path: str | Path, formats: tuple[tuple[str, ...], ...]) -> tuple
         try:
             values = [float(c) for c in cells]
         except ValueError:
-            raise RecordedDataError(f"{path}:{line_no}: not a number in '{','.join(cells)}'") from None
+            raise RecordedDataError(f"{path}:{line_no}: not a number in '{_shown(cells)}'") from None
         if not all(math.isfinite(v) for v in values):
-            raise RecordedDataError(f"{path}:{line_no}: NaN or inf in '{','.join(cells)}'")
+            raise RecordedDataError(f"{path}:{line_no}: NaN or inf in '{_shown(cells)}'")
+        _check_ranges(path, line_no, header, values)
         rows.append(values)
     if header is None:
         raise RecordedDataError(f"{path}: empty file (no header row)")
     return header, np.array(rows, dtype=float).reshape(len(rows), len(header))
+
+
+def _check_ranges(path: Path, line_no: int, header: tuple[str, ...], values: list[float]) -> None:
+    for name, value in zip(header, values, strict=True):
+        if name in POINT_COLUMNS and abs(value) > MAX_ABS_POSITION_M:
+            raise RecordedDataError(
+                f"{path}:{line_no}: {name} = {value:g} m is over {MAX_ABS_POSITION_M:g} m: give metres"
+            )
+        if name in ("roll", "pitch", "yaw") and abs(value) > MAX_ABS_ANGLE_RAD:
+            raise RecordedDataError(
+                f"{path}:{line_no}: {name} = {value:g} rad is outside +-2 pi: give radians"
+            )
 
 
 def read_points_csv(path: str | Path) -> np.ndarray:
@@ -84,7 +138,8 @@ def read_poses_csv(path: str | Path) -> np.ndarray:
         return X
     if header == POSE_COLUMNS_QUATERNION:
         q = table[:, 3:7]
-        norms = np.linalg.norm(q, axis=1)
+        with np.errstate(over="ignore"):  # a huge component gives an inf norm, refused below
+            norms = np.linalg.norm(q, axis=1)
         bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_NORM_TOLERANCE)
         if bad.size:
             raise RecordedDataError(

@@ -1,20 +1,23 @@
 """``sustain-drake calibrate eye-to-hand``: offline calibration from recorded CSV data.
 
 Exit codes: 0 converged, 2 bad input (one line on stderr), 3 not converged (the reason on stderr;
-no YAML is written then, so an earlier good result is never overwritten by a bad one).
+no YAML is written then, so an earlier good result is never overwritten by a bad one). The output
+paths are checked (writable, distinct, none of them an input) before anything is read, and every
+output is written atomically.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from sustain_drake.calibration_export import camera_config_yaml
+from sustain_drake.calibration_export import CalibrationExportError, camera_config_yaml
 from sustain_drake.cli.common import EXIT_NOT_CONVERGED, EXIT_OK, CliError
-from sustain_drake.files import write_atomically
+from sustain_drake.files import OutputPathError, check_output_paths, write_atomically
 from sustain_drake.identification import ConvergenceCriteria, IdentificationError, calibrate_eye_to_hand
 from sustain_drake.identification import eye_to_hand as eye_to_hand_formulation
 from sustain_drake.recorded_data import (
@@ -63,6 +66,10 @@ def register(subparsers) -> None:
 
 
 def _criteria(args) -> ConvergenceCriteria:
+    for flag, kind, field, _ in CRITERIA_FLAGS:
+        value = getattr(args, field)
+        if kind is float and value is not None and not math.isfinite(value):
+            raise CliError(f"{flag} must be a finite number, got {value}")
     try:
         return ConvergenceCriteria(
             **{field: getattr(args, field) for _, _, field, _ in CRITERIA_FLAGS},
@@ -83,6 +90,11 @@ def run_eye_to_hand(
     camera pose as a Drake ``CameraConfig``. Returns the exit code. ``stream``: where to print
     (default: the standard output when called, not when imported)."""
     stream = sys.stdout if stream is None else stream
+    try:
+        check_output_paths({"--out": out, "--camera-config": camera_config},
+                           {"--points": points, "--poses": poses})  # fmt: skip
+    except OutputPathError as e:
+        raise CliError(str(e)) from None
     try:
         p_C = read_points_csv(points)
         X_WH = read_poses_csv(poses)
@@ -105,18 +117,21 @@ def run_eye_to_hand(
             if path is not None:
                 print(f"{path} not written (not converged)", file=stream)
         return EXIT_NOT_CONVERGED
+    # Every text is made (and every path was checked) before any file is written.
+    texts = {}
     if out is not None:
-        try:
-            write_atomically(out, eye_to_hand_yaml(result, str(points), str(poses)))
-        except OSError as e:
-            raise CliError(f"{out}: cannot write: {e.strerror or e}") from None
-        print(f"wrote {out}", file=stream)
+        texts[out] = eye_to_hand_yaml(result, str(points), str(poses))
     if camera_config is not None:
         try:
-            write_atomically(camera_config, camera_config_yaml(result.X_WC, name="calibrated_camera"))
+            texts[camera_config] = camera_config_yaml(result.X_WC, name="calibrated_camera")
+        except CalibrationExportError as e:
+            raise CliError(f"the calibrated pose cannot be exported: {e}") from None
+    for path, text in texts.items():
+        try:
+            write_atomically(path, text)
         except OSError as e:
-            raise CliError(f"{camera_config}: cannot write: {e.strerror or e}") from None
-        print(f"wrote {camera_config}", file=stream)
+            raise CliError(f"{path}: cannot write: {e.strerror or e}") from None
+        print(f"wrote {path}", file=stream)
     return EXIT_OK
 
 

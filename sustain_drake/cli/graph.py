@@ -8,7 +8,7 @@ import subprocess
 from pathlib import Path
 
 from sustain_drake.cli.common import EXIT_OK, CliError
-from sustain_drake.files import write_atomically
+from sustain_drake.files import OutputPathError, check_output_paths, write_atomically
 from sustain_drake.station import ScenarioError, build_station, load_scenario
 
 
@@ -17,7 +17,9 @@ def register(subparsers) -> None:
         "graph", help="write a scenario's block diagram as .dot (and .svg with graphviz)")
     p.add_argument("scenario", type=Path, help="scenario YAML file, e.g. diagrams/hand_eye.yaml")
     p.add_argument("--out", type=Path,
-                   help="output .dot file (default out/graph/<scenario name>.dot)")
+                   help="output .dot file (default out/graph/<scenario name>.dot), checked writable "
+                   "before the station is built; the .svg goes beside it (an older .svg there is "
+                   "removed when graphviz is missing, so the two always match)")
     p.add_argument("--max-depth", type=int, default=1,
                    help="how many levels of sub-diagrams to expand (default %(default)s)")
     p.set_defaults(handler=run)
@@ -44,6 +46,11 @@ def write_graph(scenario_path: Path, out: Path | None = None,
     out = Path("out") / "graph" / f"{Path(scenario_path).stem}.dot" if out is None else Path(out)
     if out.suffix != ".dot":
         raise CliError(f"--out must end in .dot, got {out}")
+    svg = out.with_suffix(".svg")
+    try:  # before the station is built
+        check_output_paths({"--out": out, "--out's .svg": svg}, {"scenario": scenario_path})
+    except OutputPathError as e:
+        raise CliError(str(e)) from None
     try:
         diagram = build_station(scenario)
     except ScenarioError as e:
@@ -52,11 +59,12 @@ def write_graph(scenario_path: Path, out: Path | None = None,
     write_atomically(out, dot)
     dot_program = shutil.which("dot")
     if dot_program is None:
+        svg.unlink(missing_ok=True)  # an older graph's picture
         return out, None
     result = subprocess.run([dot_program, "-Tsvg"], input=dot.encode(), capture_output=True,
                             check=False, timeout=120)
     if result.returncode != 0:
+        svg.unlink(missing_ok=True)
         raise CliError(f"graphviz dot failed: {result.stderr.decode(errors='replace').strip()}")
-    svg = out.with_suffix(".svg")
     write_atomically(svg, result.stdout)
     return out, svg

@@ -3,8 +3,11 @@
 A scenario says everything about one simulated experiment (paper section 4): the plant, the
 RGB-D camera on the pan-tilt head, the held tool, the motion generator, the sensors' noise, the
 walking distractor and a timeline of disturbances. Every field has a default, so a scenario
-file only lists what differs; a key that is not in the schema is an error that names the key
-(see ``load_scenario``). Units are SI (m, s, rad, kg, N, N m).
+file only lists what differs. Units are SI (m, s, rad, kg, N, N m). ``validate_scenario`` checks a
+scenario before anything is built: every number finite and in its range (``RANGES``, by section
+and key), fixed poses (``POSES``), Drake's strings, the sections' consistency; every problem (and
+an unknown or duplicate key, a value of the wrong type) is a one-line ``ScenarioError`` naming the
+key.
 """
 
 
@@ -64,8 +67,8 @@ class HeadConfig:
     # pose of the post's foot in the world (+x forward): 1.4 m in front of the arm, looking back at it
     X_WP: Transform = field(default_factory=lambda: Transform(
         RigidTransform(RollPitchYaw(0.0, 0.0, math.pi), [1.4, 0.0, 0.0])))
-    pan: float = 0.0  # rad: initial pan angle
-    tilt: float = 0.1  # rad: initial tilt angle (positive looks down, towards the arm)
+    pan: float = 0.0  # rad: initial pan angle, within +-pi
+    tilt: float = 0.1  # rad: initial tilt angle, within +-pi (positive looks down, towards the arm)
 
 
 @dataclasses.dataclass
@@ -75,8 +78,8 @@ class ToolConfig:
     model: str = "rod"  # the held tool: "rod" (0.3 m, 0.1 kg), "box" (0.6 kg) or "none"
     # pose of the tool frame T in the grasp frame G (between the fingers, z along the approach)
     X_GT: Transform = field(default_factory=Transform)
-    slide: float = 0.0  # m: initial slip along G's z (see ToolSlip)
-    pivot: float = 0.0  # rad: initial slip about G's x (see ToolSlip)
+    slide: float = 0.0  # m: initial slip along G's z (see ToolSlip), within +-0.15 m (half the rod)
+    pivot: float = 0.0  # rad: initial slip about G's x (see ToolSlip), within +-pi/2
     gripper_position: float = 0.0225  # m: the finger's closed position on this tool (0: open)
 
 
@@ -84,7 +87,7 @@ class ToolConfig:
 class MotionConfig:
     """The babbling motion generator (smooth random joint-space moves within ranges)."""
 
-    seed: int = 0  # seed of the random moves
+    seed: int = 0  # seed of the random moves (any integer >= 0)
     # rad: [lower, upper] per arm joint, clipped to the model's joint limits
     joint_ranges: list[list[float]] = field(default_factory=lambda: [
         [-0.8, 0.8], [0.2, 1.0], [0.6, 1.6], [-0.4, 1.2], [-1.5, 1.5]])
@@ -109,12 +112,12 @@ class MotionConfig:
 class WrenchSensorConfig:
     """The wrist force/torque sensor; noise like an ATI Mini40."""
 
-    rate: float = 100.0  # Hz: sample rate of the reading
+    rate: float = 100.0  # Hz: sample rate of the reading (at most 10 kHz)
     force_noise: float = 0.02  # N: standard deviation per axis
     torque_noise: float = 0.0005  # N m: standard deviation per axis
     # N m, N: constant offset added to the reading, [tau_x, tau_y, tau_z, f_x, f_y, f_z]
     bias: list[float] = field(default_factory=lambda: [0.0] * 6)
-    seed: int = 1  # seed of the sensor noise
+    seed: int = 1  # seed of the sensor noise (any integer >= 0)
     # subtract the gripper's own static weight (as after an F/T tool calibration), so the reading
     # at rest is the held object's weight alone; off: the raw weld reaction
     compensate_gripper: bool = False
@@ -129,7 +132,7 @@ class DepthNoiseConfig:
     a: float = 0.0012  # m: sigma at z0 (Nguyen et al.: 1.2 mm)
     b: float = 0.0019  # 1/m: growth of sigma with (z - z0)^2 (Nguyen et al.: 1.9 mm/m^2)
     z0: float = 0.4  # m: range of the least noise (Nguyen et al.: 0.4 m)
-    seed: int = 2  # seed of the depth noise
+    seed: int = 2  # seed of the depth noise (any integer >= 0)
 
 
 @dataclasses.dataclass
@@ -137,7 +140,8 @@ class DistractorConfig:
     """The walking person: a scripted path of floor waypoints walked at constant speed."""
 
     enabled: bool = True  # add the walking person
-    # m: [x, y] floor waypoints in the world frame; the default path crosses behind the arm
+    # m: [x, y] floor waypoints in the world frame (not all the same); the default path crosses behind
+    # the arm
     waypoints: list[list[float]] = field(default_factory=lambda: [[-1.0, -2.5], [-1.0, 2.5]])
     speed: float = 1.0  # m/s: walking speed
     start_time: float = 2.0  # s the person waits at the first waypoint before walking
@@ -158,8 +162,8 @@ class ToolSlip:
     """The tool slips in the gripper to a new slip state, measured from its configured pose X_GT."""
 
     time: float = 0.0  # s: when the slip starts
-    slide: float = 0.0  # m: new slide along the grasp frame's z
-    pivot: float = 0.0  # rad: new pivot about the grasp frame's x (the finger closing axis)
+    slide: float = 0.0  # m: new slide along the grasp frame's z, within +-0.15 m
+    pivot: float = 0.0  # rad: new pivot about the grasp frame's x (the finger closing axis), within +-pi/2
     duration: float = 0.1  # s the slip takes
 
 
@@ -168,8 +172,8 @@ class HeadMove:
     """The head turns to new pan/tilt angles."""
 
     time: float = 0.0  # s: when the turn starts
-    pan: float = 0.0  # rad: new pan angle
-    tilt: float = 0.1  # rad: new tilt angle
+    pan: float = 0.0  # rad: new pan angle, within +-pi
+    tilt: float = 0.1  # rad: new tilt angle, within +-pi
     duration: float = 0.5  # s the turn takes
 
 
@@ -234,9 +238,10 @@ class Scenario:
     it (``sustain_drake.experiments``)."""
 
     duration: float = 10.0  # s: default length of a simulate run
-    # the plant: 2 ms discrete (SAP) steps, stable with implicit PD actuators
+    # the plant: 2 ms discrete (SAP) steps, stable with implicit PD actuators (time_step from 10 us to 10 ms)
     plant_config: MultibodyPlantConfig = field(default_factory=_default_plant_config)
-    # the head's RGB-D camera: 30 fps, color, depth and label images, 0.1-5 m depth range
+    # the head's RGB-D camera: 30 fps, color, depth and label images, 0.1-5 m depth range (at most
+    # 4096 px a side and 240 fps)
     camera: CameraConfig = field(default_factory=_default_camera)
     head: HeadConfig = field(default_factory=HeadConfig)  # the pan-tilt head carrying the camera
     tool: ToolConfig = field(default_factory=ToolConfig)  # the held tool and its grasp
@@ -259,22 +264,45 @@ class Scenario:
 
 
 def load_scenario(filename: str | Path, scenario_name: str | None = None) -> Scenario:
-    """Loads and checks a scenario file; every problem is a one-line ``ScenarioError``.
+    """Loads and checks a scenario file; every problem is a one-line ``ScenarioError`` naming the
+    key, raised before anything is built (see ``validate_scenario``).
 
     A file is either one scenario (its top-level keys are ``Scenario`` fields) or several named
     scenarios (its top-level keys are names; a variant is a YAML merge of a base, ``<<: *base``).
     ``scenario_name`` picks one of several; None picks the one named like the file (``hand_eye``
-    in ``hand_eye.yaml``) or the only one."""
+    in ``hand_eye.yaml``) or the only one. A key given twice in one mapping is an error."""
     path = Path(filename)
     name = scenario_name_in(path, scenario_name)
     try:
-        scenario = yaml_load_typed(schema=Scenario, filename=str(path), child_name=name)
-    except Exception as e:  # yaml_load_typed raises RuntimeError/ValueError/yaml errors
-        raise ScenarioError(f"{_where(path, name)}: {one_line(e)}") from None
-    try:
-        validate_scenario(scenario)
+        return _load_text(path.read_text(encoding="utf-8"), name)
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError(f"{path}: not a readable YAML file ({one_line(e)})") from None
     except ScenarioError as e:
         raise ScenarioError(f"{_where(path, name)}: {e}") from None
+
+
+def _load_text(text: str, name: str | None) -> Scenario:
+    """The scenario ``name`` (None: the whole document) of the YAML ``text``, checked."""
+    # These modules read this one's types, so they are imported when first needed.
+    from sustain_drake.station.scenario_yaml import (
+        _check_duplicate_keys,
+        _load_problem,
+        _raw_document,
+        _shape_problem,
+    )
+
+    _check_duplicate_keys(text)
+    raw = _raw_document(text)
+    root = raw.get(name) if isinstance(raw, dict) and name is not None else raw
+    if isinstance(root, dict):
+        problem = _shape_problem(root, Scenario, "")
+        if problem:
+            raise ScenarioError(problem)
+    try:
+        scenario = yaml_load_typed(schema=Scenario, data=text, child_name=name)
+    except Exception as e:  # yaml_load_typed raises RuntimeError/ValueError/TypeError/yaml errors
+        raise ScenarioError(_load_problem(text, name, e)) from None
+    validate_scenario(scenario, experiments=True)
     return scenario
 
 
@@ -323,13 +351,11 @@ def _where(path: Path, name: str | None) -> str:
 
 
 def load_scenario_string(data: str, name: str = "<string>") -> Scenario:
-    """Like ``load_scenario`` for the YAML text of one scenario (tests, embedding)."""
+    """Like ``load_scenario`` for the YAML text of one scenario (tests, embedding, sweeps)."""
     try:
-        scenario = yaml_load_typed(schema=Scenario, data=data)
-    except Exception as e:
-        raise ScenarioError(f"{name}: {one_line(e)}") from None
-    validate_scenario(scenario)
-    return scenario
+        return _load_text(data, None)
+    except ScenarioError as e:
+        raise ScenarioError(f"{name}: {e}") from None
 
 
 def scenario_text(scenario: Scenario) -> str:
@@ -353,7 +379,7 @@ def with_seed(scenario: Scenario, seed: int) -> Scenario:
     seeded.wrench_sensor.seed = int(seed) + 2000
     delay = np.random.default_rng([int(seed), 2024]).uniform(0.0, SEED_START_SPREAD)
     seeded.distractor.start_time += float(delay)
-    validate_scenario(seeded)
+    validate_scenario(seeded, experiments=True)
     return seeded
 
 
@@ -374,104 +400,8 @@ def one_line(error: Exception) -> str:
     return message if len(message) <= 300 else message[:297] + "..."
 
 
-def _check(condition: bool, message: str) -> None:
-    if not condition:
-        raise ScenarioError(message)
+def validate_scenario(s: Scenario, *, experiments: bool = False) -> None:
+    """Rejects values the simulation cannot use (``station.validation.validate_scenario``)."""
+    from sustain_drake.station.validation import validate_scenario as validate  # reads this module
 
-
-def _finite(values, name: str) -> None:
-    _check(all(math.isfinite(float(v)) for v in values), f"{name} must be finite numbers")
-
-
-def validate_scenario(s: Scenario) -> None:
-    """Rejects values the simulation cannot use, so no NaN or nonsense reaches the systems."""
-    _check(math.isfinite(s.duration) and s.duration > 0, "duration must be a positive number")
-    _check(s.plant_config.time_step > 0, "plant_config.time_step must be > 0 (a discrete "
-           "plant is needed for the PD-controlled actuators)")
-    _check(s.camera.fps > 0, "camera.fps must be > 0")
-    try:
-        s.camera.MakeCameras()  # validates the intrinsics and ranges
-    except Exception as e:
-        raise ScenarioError(f"camera: {one_line(e)}") from None
-    _check(s.camera.renderer_class in ("", "RenderEngineVtk"),
-           "camera.renderer_class: only Drake's VTK renderer is supported (headless)")
-    _check(s.tool.model in TOOL_MODELS, f"tool.model must be one of {', '.join(TOOL_MODELS)}")
-    _finite([s.head.pan, s.head.tilt, s.tool.slide, s.tool.pivot, s.tool.gripper_position],
-            "head/tool values")
-    m = s.motion
-    _check(len(m.joint_ranges) == len(ARM_JOINTS)
-           and all(len(r) == 2 and r[0] <= r[1] for r in m.joint_ranges),
-           f"motion.joint_ranges needs {len(ARM_JOINTS)} [lower, upper] pairs with lower <= upper")
-    _finite([v for r in m.joint_ranges for v in r], "motion.joint_ranges")
-    _check(len(m.initial_posture) == len(ARM_JOINTS),
-           f"motion.initial_posture needs {len(ARM_JOINTS)} angles")
-    _finite(m.initial_posture, "motion.initial_posture")
-    _check(m.max_speed > 0 and m.min_duration > 0 and m.dwell >= 0 and m.period > 0
-           and m.confirm_hold >= 0,
-           "motion: max_speed, min_duration and period must be > 0, dwell and confirm_hold "
-           ">= 0")
-    _check(m.confirm_step >= 0 and m.confirm_near >= 0,
-           "motion: confirm_step and confirm_near must be >= 0")
-    w = s.wrench_sensor
-    _check(w.rate > 0 and w.force_noise >= 0 and w.torque_noise >= 0,
-           "wrench_sensor: rate must be > 0 and noise >= 0")
-    _check(len(w.bias) == 6, "wrench_sensor.bias needs 6 numbers [tau_x..tau_z, f_x..f_z]")
-    _finite(w.bias, "wrench_sensor.bias")
-    d = s.depth_noise
-    _check(d.a >= 0 and d.b >= 0, "depth_noise: a and b must be >= 0")
-    p = s.distractor
-    _check(len(p.waypoints) >= 2 and all(len(w) == 2 for w in p.waypoints),
-           "distractor.waypoints needs at least 2 [x, y] points")
-    _finite([v for w in p.waypoints for v in w], "distractor.waypoints")
-    _check(p.speed > 0, "distractor.speed must be > 0")
-    for i, e in enumerate(s.disturbances):
-        name = f"disturbances[{i}] ({type(e).__name__})"
-        _check(math.isfinite(e.time) and e.time >= 0, f"{name}: time must be >= 0")
-        _check(math.isfinite(e.duration) and e.duration > 0, f"{name}: duration must be > 0")
-        if isinstance(e, Touch):
-            _check(len(e.p_TQ) == 3 and len(e.f_T) == 3, f"{name}: p_TQ and f_T need 3 numbers")
-            _finite(list(e.p_TQ) + list(e.f_T), name)
-            _check(s.tool.model != "none", f"{name}: there is no tool to touch")
-        elif isinstance(e, ToolSlip):
-            _finite([e.slide, e.pivot], name)
-            _check(s.tool.model != "none", f"{name}: there is no tool to slip")
-        else:
-            _finite([e.pan, e.tilt], name)
-    # The math layer's settings check themselves on construction; a loaded file set their fields
-    # one by one, so construct a copy (whether or not the experiment is on).
-    for name, section in (("hand_eye.candidates", s.hand_eye.candidates),
-                          ("hand_eye.refinement", s.hand_eye.refinement),
-                          ("hand_eye.camera_motion", s.hand_eye.camera_motion)):
-        try:
-            dataclasses.replace(section)
-        except ValueError as e:
-            raise ScenarioError(f"{name}: {one_line(e)}") from None
-    k = s.kinesthetic
-    if k.enabled:
-        _check(s.tool.model == "box", "kinesthetic: needs tool.model: box (the tool with a collision "
-               "shape to locate touches on)")
-        q = k.quasi_static
-        _finite([k.period, k.min_touch_force, k.eval_min_force, q.max_joint_speed,
-                 q.max_joint_acceleration, q.window, q.touch_holdoff, q.max_touch_duration],
-                "kinesthetic values")
-        _check(k.period > 0 and k.min_touch_force >= 0 and k.eval_min_force >= 0
-               and q.max_joint_speed > 0 and q.max_joint_acceleration > 0 and q.window >= 0
-               and q.touch_holdoff >= 0 and q.max_touch_duration > 0,
-               "kinesthetic: period and the quasi-static limits must be > 0, forces and times >= 0")
-    tm = s.touch_motion
-    if tm.enabled:
-        _check(s.tool.model != "none", "touch_motion: there is no tool to touch with")
-        _check(len(tm.targets) > 0, "touch_motion.targets: at least one target is needed")
-        for i, g in enumerate(tm.targets):
-            _check(len(g.p_TQ) == 3 and len(g.down_T) == 3 and len(g.p_WQ) == 2,
-                   f"touch_motion.targets[{i}]: p_TQ and down_T need 3 numbers, p_WQ 2")
-            _finite(list(g.p_TQ) + list(g.down_T) + list(g.p_WQ), f"touch_motion.targets[{i}]")
-            _check(any(g.down_T), f"touch_motion.targets[{i}]: down_T must not be zero")
-        _finite([tm.approach_height, tm.retreat_height, tm.press_depth, tm.descend_speed, tm.press_extra,
-                 tm.keep_touching, tm.start_delay, tm.max_speed, tm.rest], "touch_motion values")
-        _check(tm.approach_height > 0 and tm.retreat_height >= tm.approach_height
-               and tm.press_depth > 0 and tm.descend_speed > 0
-               and tm.max_speed > 0 and tm.keep_touching >= 0 and tm.start_delay >= 0 and tm.rest >= 0
-               and 0 <= tm.press_extra <= tm.approach_height + tm.press_depth,
-               "touch_motion: heights, speeds must be > 0, times >= 0, press_extra within the "
-               "descent")
+    validate(s, experiments=experiments)

@@ -140,7 +140,7 @@ def _cell(index: int, base: Scenario, values: dict[str, yaml.Node], duration: fl
         scenario = base
         if settings:
             scenario = yaml_load_typed(schema=Scenario, data=override_document(settings), defaults=base)
-            validate_scenario(scenario)
+            validate_scenario(scenario, experiments=True)
         if SEED_AXIS in values:
             seed = yaml.safe_load(yaml.serialize(values[SEED_AXIS]))
             if seed is not None:
