@@ -5,6 +5,8 @@
 - ``eye_to_hand``: the one-point eye-to-hand formulation (N = 16), conditioning, refinement.
 - ``payload``: the static payload formulation (N = 5) and the wrench sign convention.
 - ``batch``: ``calibrate_eye_to_hand`` and ``identify_payload`` for recorded data.
+- ``errors``: ``IdentificationError`` (a ``ValueError``), the only exception the API raises for a
+  bad argument (wrong type, shape or value; one-line message naming it), and its checks.
 """
 
 from sustain_drake.identification.batch import (

@@ -2,6 +2,9 @@
 
 The samples stream through the same constant-memory identifiers that the Drake systems use; the
 arrays are only kept here to report per-sample residuals.
+
+Every public function raises ``IdentificationError`` (a ``ValueError``, see ``errors``) with a
+one-line message for an argument of the wrong type, shape or value.
 """
 
 from __future__ import annotations
@@ -12,15 +15,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from sustain_drake.identification import eye_to_hand, payload
+from sustain_drake.identification.errors import (
+    ROTATION_TOLERANCE,
+    VECTOR3,
+    describe,
+    instance,
+    real_array,
+    to_float_array,
+)
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     IdentificationError,
     Verdict,
 )
-
-# Tolerance on |R^T R - I| for a pose's rotation block (poses read from text files with ~7
-# significant digits are orthonormal to ~1e-7).
-ROTATION_TOLERANCE = 1e-5
 
 
 def _check_finite(name: str, a: np.ndarray) -> None:
@@ -31,7 +38,11 @@ def _check_finite(name: str, a: np.ndarray) -> None:
 
 
 def check_rotations(name: str, R: np.ndarray) -> None:
-    """Raises IdentificationError if any ``R[i]`` is not a proper rotation to ROTATION_TOLERANCE."""
+    """Raises IdentificationError if any ``R[i]`` is not a proper rotation to ROTATION_TOLERANCE
+    (each entry of ``R^T R - I``), or if ``R`` is not a finite (n, 3, 3) array."""
+    if type(name) is not str:
+        raise IdentificationError(f"name must be a string, got {type(name).__name__}")
+    R = real_array(name, R, (None, 3, 3))
     err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2))
     det = np.linalg.det(R)
     bad = np.flatnonzero((err > ROTATION_TOLERANCE) | (det < 0.0))
@@ -44,9 +55,9 @@ def check_rotations(name: str, R: np.ndarray) -> None:
 
 def _as_array(name: str, a, shape_tail: tuple[int, ...]) -> np.ndarray:
     try:
-        a = np.asarray(a, dtype=float)
-    except (TypeError, ValueError) as e:
-        raise IdentificationError(f"{name} is not a numeric array: {e}") from None
+        a = to_float_array(name, a, "an array")
+    except IdentificationError:
+        raise IdentificationError(f"{name} is not a numeric array of real numbers: {describe(a)}") from None
     if a.ndim != 1 + len(shape_tail) or a.shape[1:] != shape_tail:
         want = "(n, " + ", ".join(str(s) for s in shape_tail) + ")"
         raise IdentificationError(f"{name} must have shape {want}, got {a.shape}")
@@ -91,7 +102,17 @@ class EyeToHandResult:
 
 
 def eye_to_hand_residuals(X_WC: np.ndarray, p_HP: np.ndarray, p_C: np.ndarray, X_WH: np.ndarray):
-    """Per-sample distances ``|R_WC p_CP + p_WC - (R_WH p_HP + p_WH)|`` in metres."""
+    """Per-sample distances ``|R_WC p_CP + p_WC - (R_WH p_HP + p_WH)|`` in metres.
+    IdentificationError unless ``X_WC`` is a real 4 x 4 matrix, ``p_HP`` a real 3-vector, ``p_C``
+    (n, 3) and ``X_WH`` (n, 4, 4) real arrays (NaN or inf give non-finite distances)."""
+    X_WC = real_array("X_WC", X_WC, (4, 4), finite=False)
+    p_HP = real_array("p_HP", p_HP, VECTOR3, finite=False)
+    p_C = real_array("p_C", p_C, (None, 3), finite=False)
+    X_WH = real_array("X_WH", X_WH, (None, 4, 4), finite=False)
+    if len(p_C) != len(X_WH):
+        raise IdentificationError(
+            f"p_C has {len(p_C)} samples but X_WH has {len(X_WH)}: they must pair one to one"
+        )
     p_W_cam = p_C @ X_WC[:3, :3].T + X_WC[:3, 3]
     p_W_hand = np.einsum("nij,j->ni", X_WH[:, :3, :3], p_HP) + X_WH[:, :3, 3]
     return np.linalg.norm(p_W_cam - p_W_hand, axis=1)
@@ -111,9 +132,10 @@ def calibrate_eye_to_hand(p_C, X_WH, criteria: ConvergenceCriteria | None = None
         error: the verdict says "not converged" and why.
 
     Raises:
-        IdentificationError (a ValueError): wrong shapes, mismatched lengths, NaN/inf, or a pose
-            whose rotation block is not a rotation.
+        IdentificationError (a ValueError): wrong types or shapes, mismatched lengths, NaN/inf, a
+            pose whose rotation block is not a rotation, or ``criteria`` not a ConvergenceCriteria.
     """
+    instance("criteria", criteria, ConvergenceCriteria, "a ConvergenceCriteria or None", optional=True)
     p_C = _as_array("p_C", p_C, (3,))
     X_WH = _as_array("X_WH", X_WH, (4, 4))
     if len(p_C) != len(X_WH):
@@ -185,9 +207,11 @@ def identify_payload(
         criteria: convergence criteria (``payload.default_criteria()`` if None).
 
     Raises:
-        IdentificationError (a ValueError): wrong shapes, mismatched lengths, NaN/inf, or an
-            orientation that is not a rotation.
+        IdentificationError (a ValueError): wrong types or shapes, mismatched lengths, NaN/inf, an
+            orientation that is not a rotation, ``gravity_W`` not a finite non-zero 3-vector or
+            ``criteria`` not a ConvergenceCriteria.
     """
+    instance("criteria", criteria, ConvergenceCriteria, "a ConvergenceCriteria or None", optional=True)
     wrench_K = _as_array("wrench_K", wrench_K, (6,))
     R_WK = _as_array("R_WK", R_WK, (3, 3))
     if len(wrench_K) != len(R_WK):

@@ -29,6 +29,9 @@ moves fit no camera. Without these inputs (None) the rule is the one above, unch
 
 The state is a small flat vector (``CoordinationState``) so that a Drake system can hold it in its
 context; ``step`` is a pure function of it.
+
+Every public function raises ``IdentificationError`` (a ``ValueError``, see ``errors``) with a
+one-line message for an argument of the wrong type, shape or value.
 """
 
 from __future__ import annotations
@@ -37,6 +40,16 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from sustain_drake.identification.errors import (
+    F64,
+    IdentificationError,
+    flag,
+    instance,
+    integer,
+    real_array,
+    real_number,
+)
 
 IDENTIFY = 0
 OBSERVE = 1
@@ -61,6 +74,8 @@ class CoordinationRule:
         max_consecutive_violations: this many consecutive samples over ``sigma`` is a change
             (paper: 10; so 9 do nothing).
         pause_after_convergence: seconds the motion pauses after a convergence (paper: 3 s).
+
+    Raises IdentificationError for a setting of the wrong type or out of its range.
     """
 
     allowable_error_factor: float = 100.0
@@ -70,16 +85,17 @@ class CoordinationRule:
     adopt_refinements: bool = False
 
     def __post_init__(self):
-        if not (self.noise_rms >= 0 and math.isfinite(self.noise_rms)):
-            raise ValueError(f"noise_rms must be >= 0, got {self.noise_rms}")
-        if not (self.allowable_error_factor > 0 and math.isfinite(self.allowable_error_factor)):
-            raise ValueError(f"allowable_error_factor must be positive, got {self.allowable_error_factor}")
-        if not self.max_consecutive_violations >= 1:
-            raise ValueError(
-                f"max_consecutive_violations must be >= 1, got {self.max_consecutive_violations}"
-            )
-        if not self.pause_after_convergence >= 0:
-            raise ValueError(f"pause_after_convergence must be >= 0, got {self.pause_after_convergence}")
+        noise = real_number("noise_rms", self.noise_rms, what="a number >= 0")
+        if not noise >= 0:
+            raise IdentificationError(f"noise_rms must be >= 0, got {noise}")
+        factor = real_number("allowable_error_factor", self.allowable_error_factor, what="a positive number")
+        if not factor > 0:
+            raise IdentificationError(f"allowable_error_factor must be positive, got {factor}")
+        integer("max_consecutive_violations", self.max_consecutive_violations, 1)
+        pause = real_number("pause_after_convergence", self.pause_after_convergence, what="a number >= 0")
+        if not pause >= 0:
+            raise IdentificationError(f"pause_after_convergence must be >= 0, got {pause}")
+        flag("adopt_refinements", self.adopt_refinements)
 
 
 # Layout of the state vector.
@@ -97,7 +113,14 @@ RESET_REASON_NAMES = {NO_RESET: "none", OBSERVATION_FAILED: "observation failed"
 
 def allowable_error(rule: CoordinationRule, expected_mse: float) -> float:
     """``sigma = factor * max(a^2 lambda_N, noise_rms^2)``: the paper's allowable error (§3.1, §4.3:
-    100 lambda_16) with the sensor's noise as a floor under the identification's expected error."""
+    100 lambda_16) with the sensor's noise as a floor under the identification's expected error.
+    IdentificationError unless ``rule`` is a CoordinationRule and ``expected_mse`` a finite number."""
+    instance("rule", rule, CoordinationRule, "a CoordinationRule")
+    expected_mse = real_number("expected_mse", expected_mse)
+    return _allowable_error(rule, expected_mse)
+
+
+def _allowable_error(rule: CoordinationRule, expected_mse: float) -> float:
     return rule.allowable_error_factor * max(expected_mse, rule.noise_rms**2, 0.0)
 
 
@@ -152,7 +175,15 @@ def step(
             converged solution with a higher counter than the adopted one is a refinement of it.
         camera_moving, camera_moves: the camera-motion detector's ``[moving, moves]`` (None: no
             detector, the paper's rule alone): a count above the last one seen is a new camera move.
+
+    Raises IdentificationError for an argument of the wrong type or value: ``state`` not a real
+    vector of STATE_SIZE, ``rule`` not a CoordinationRule, ``time`` not finite, ``converged`` and
+    ``camera_moving`` not bools, ``expected_mse`` and ``sample_error`` not numbers (NaN or inf:
+    not converged, a violation), the counts not integers >= 0.
     """
+    state, expected_mse, sample_error = _checked_step_arguments(
+        state, rule, time, converged, expected_mse, sample_count, sample_error, num_samples, refinement,
+        camera_moving, camera_moves)  # fmt: skip
     new = state.copy()
     new_sample = sample_count != int(state[LAST_SAMPLE])
     new[LAST_SAMPLE] = sample_count
@@ -173,7 +204,7 @@ def step(
         if converged and math.isfinite(expected_mse) and not stale:
             new[MODE] = OBSERVE
             new[VIOLATIONS] = 0
-            new[SIGMA] = allowable_error(rule, expected_mse)
+            new[SIGMA] = _allowable_error(rule, expected_mse)
             new[PAUSE_ID] += 1
             new[CONVERGENCES] += 1
             new[REFINEMENT] = refinement
@@ -182,7 +213,7 @@ def step(
     refined = refinement > state[REFINEMENT] and converged and math.isfinite(expected_mse)
     if rule.adopt_refinements and refined:
         new[REFINEMENT] = refinement
-        new[SIGMA] = allowable_error(rule, expected_mse)
+        new[SIGMA] = _allowable_error(rule, expected_mse)
         new[VIOLATIONS] = 0
         return new, Event(time, REFINED, f"allowable error {new[SIGMA]:.3g}")
     if not new_sample:
@@ -195,6 +226,27 @@ def step(
         return _detect_change(new, sample_count, OBSERVATION_FAILED), Event(
             time, CHANGE_DETECTED, f"{rule.max_consecutive_violations} samples over the limit")
     return new, None
+
+
+def _checked_step_arguments(state, rule, time, converged, expected_mse, sample_count, sample_error,
+                            num_samples, refinement, camera_moving, camera_moves):  # fmt: skip
+    """``step``'s arguments checked (IdentificationError naming the first bad one); returns the state
+    as a float64 vector and the two errors as floats."""
+    if not (type(state) is np.ndarray and state.dtype is F64 and state.shape == (STATE_SIZE,)):
+        state = real_array("state", state, (STATE_SIZE,), finite=False)
+    instance("rule", rule, CoordinationRule, "a CoordinationRule")
+    real_number("time", time)
+    flag("converged", converged)
+    expected_mse = real_number("expected_mse", expected_mse, finite=False)
+    integer("sample_count", sample_count, 0)
+    sample_error = real_number("sample_error", sample_error, finite=False)
+    if num_samples is not None:
+        integer("num_samples", num_samples, 0)
+    integer("refinement", refinement, 0)
+    flag("camera_moving", camera_moving)
+    if camera_moves is not None:
+        integer("camera_moves", camera_moves, 0)
+    return state, expected_mse, sample_error
 
 
 def _detect_change(new: np.ndarray, sample_count: int, reason: int) -> np.ndarray:

@@ -20,6 +20,9 @@ Beyond the paper:
 - the sign of ``v_N`` and a proper rotation (§3.2, see ``rotation.project_to_rotation``);
 - a Gauss-Newton refinement on SO(3) x R^3 x R^3 of the geometric cost
   ``sum ||R_WC p_CP + p_WC - R_WH p_HP - p_WH||^2 = x^T S x``, run from the statistic alone.
+
+Every public function and method raises ``IdentificationError`` (a ``ValueError``, see ``errors``)
+with a one-line message for an argument of the wrong type, shape or value.
 """
 
 from __future__ import annotations
@@ -31,7 +34,25 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from sustain_drake.identification.rotation import nearest_rotation, projection_parts, skew, so3_exp
+from sustain_drake.identification.errors import (
+    F64,
+    MATRIX3,
+    VECTOR3,
+    check_finite,
+    describe,
+    flag,
+    homogeneous_transform,
+    instance,
+    integer,
+    is_rotation,
+    not_a_rotation,
+    out_array,
+    real_array,
+    real_number,
+    rotation,
+    to_float_array,
+)
+from sustain_drake.identification.rotation import _nearest_rotation, _projection_parts, _skew, _so3_exp
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     EigenSolution,
@@ -44,6 +65,7 @@ from sustain_drake.identification.sustainable_identifier import (
 
 N_UNKNOWNS = 16
 M_ROWS = 3
+_S_SHAPE = (N_UNKNOWNS, N_UNKNOWNS)
 
 # Index arrays that write [c_x E, c_y E, c_z E, E] into A_t[:, 0:12] without np.kron.
 _ROWS = np.tile(np.arange(3), 4)
@@ -127,7 +149,13 @@ class EyeToHandSolution(SolutionProperties):
 
 
 def build_A(p_CP: np.ndarray, R_WH: np.ndarray, p_WH: np.ndarray, out: np.ndarray | None = None):
-    """``A_t`` of Eq. (35) (3 x 16) for one sample."""
+    """``A_t`` of Eq. (35) (3 x 16) for one sample (written into ``out``, a float64 3 x 16 array
+    built by an earlier call, if given). IdentificationError unless ``p_CP``, ``R_WH``, ``p_WH`` are
+    a real 3-vector, 3 x 3 matrix and 3-vector (NaN and inf are copied as they are)."""
+    p_CP = real_array("p_CP", p_CP, VECTOR3, finite=False)
+    R_WH = real_array("R_WH", R_WH, MATRIX3, finite=False)
+    p_WH = real_array("p_WH", p_WH, VECTOR3, finite=False)
+    out = out_array("out", out, (M_ROWS, N_UNKNOWNS))
     A = np.zeros((M_ROWS, N_UNKNOWNS)) if out is None else out
     cx, cy, cz = p_CP[0], p_CP[1], p_CP[2]
     A[_ROWS, _COLS] = (cx, cx, cx, cy, cy, cy, cz, cz, cz, 1.0, 1.0, 1.0)
@@ -137,7 +165,15 @@ def build_A(p_CP: np.ndarray, R_WH: np.ndarray, p_WH: np.ndarray, out: np.ndarra
 
 
 def pack_x(R_WC: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray) -> np.ndarray:
-    """Eq. (36): ``x = [vec(R_WC); p_WC; p_HP; 1]`` (``vec`` stacks the columns)."""
+    """Eq. (36): ``x = [vec(R_WC); p_WC; p_HP; 1]`` (``vec`` stacks the columns). IdentificationError
+    unless the arguments are a real 3 x 3 matrix and two real 3-vectors."""
+    R_WC = real_array("R_WC", R_WC, MATRIX3, finite=False)
+    p_WC = real_array("p_WC", p_WC, VECTOR3, finite=False)
+    p_HP = real_array("p_HP", p_HP, VECTOR3, finite=False)
+    return _pack_x(R_WC, p_WC, p_HP)
+
+
+def _pack_x(R_WC: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray) -> np.ndarray:
     return np.concatenate([R_WC.reshape(9, order="F"), p_WC, p_HP, [1.0]])
 
 
@@ -154,7 +190,19 @@ def conditioning_transform(S: np.ndarray, out: np.ndarray | None = None) -> np.n
     The running sums it needs are entries of the statistic itself (no extra memory): with
     ``S = sum A_t^T A_t``, ``S[9,9] = n``, ``S[0,9], S[3,9], S[6,9] = sum p_CP``,
     ``S[0,0] + S[3,3] + S[6,6] = sum |p_CP|^2`` and ``S[9:12, 15] = -sum p_WH``.
+
+    IdentificationError unless ``S`` is a finite 16 x 16 statistic of at least one sample
+    (``S[9, 9] > 0``) and ``out`` None or a writable float64 16 x 16 array.
     """
+    S = real_array("S", S, (N_UNKNOWNS, N_UNKNOWNS))
+    if not S[9, 9] > 0.0:
+        raise IdentificationError(f"S must hold a sample (S[9, 9] > 0), got S[9, 9] = {S[9, 9]:.3g}")
+    out = out_array("out", out, (N_UNKNOWNS, N_UNKNOWNS))
+    return _conditioning_transform(S, out)
+
+
+def _conditioning_transform(S: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``conditioning_transform`` unchecked (every solve)."""
     # Python floats: the same IEEE arithmetic as numpy scalars, at a fraction of the call cost
     # (numpy scalars when n = 0, which give NaN rather than raise).
     sums = S.take(_SUMS_FLAT)
@@ -191,7 +239,7 @@ _T_FLAT = np.concatenate(
 )
 
 
-_SKEW_BASIS = [skew(e) for e in np.eye(3)]
+_SKEW_BASIS = [_skew(e) for e in np.eye(3)]
 _SMALL_STEP = 1e-6  # radians / metres
 
 
@@ -218,8 +266,46 @@ def refine(
     the rotation perturbation gives the Gauss-Newton step exactly. It stops when a step is below
     ``tolerance`` (radians and metres). Far from the optimum, a step that would increase the cost is
     halved (at most 10 times); steps below 1e-6 are taken in full.
+
+    IdentificationError unless ``S`` is a finite 16 x 16 matrix, ``weight`` a positive number,
+    ``R`` a rotation matrix, ``p_WC`` and ``p_HP`` finite 3-vectors, ``max_iterations`` an integer
+    >= 0 and ``tolerance`` a number >= 0.
     """
-    x = pack_x(R, p_WC, p_HP)
+    # The usual call (float64 arrays, Python numbers, a rotation) runs at once: NaN or inf in S or
+    # the points give a NaN cost, checked after the run (checks before it slow it down by more
+    # than their own cost).
+    if (type(S) is np.ndarray and S.dtype is F64 and S.shape == _S_SHAPE and type(R) is np.ndarray
+            and R.dtype is F64 and R.shape == MATRIX3 and type(p_WC) is np.ndarray and p_WC.dtype is F64
+            and p_WC.shape == VECTOR3 and type(p_HP) is np.ndarray and p_HP.dtype is F64
+            and p_HP.shape == VECTOR3 and type(weight) is float and 0.0 < weight < math.inf
+            and type(max_iterations) is int and max_iterations >= 0 and type(tolerance) is float
+            and tolerance >= 0.0 and is_rotation(R.tolist())):  # fmt: skip
+        try:
+            estimate = _gauss_newton(S, weight, R, p_WC, p_HP, max_iterations, tolerance)
+        except np.linalg.LinAlgError:  # only for NaN or inf in S
+            estimate = None
+        if estimate is not None and math.isfinite(estimate.mean_squared_error):
+            return estimate
+    S = real_array("S", S, _S_SHAPE)
+    weight = real_number("weight", weight, what="a positive number")
+    if not weight > 0.0:
+        raise IdentificationError(f"weight must be a positive number, got {weight}")
+    R = rotation("R", R)
+    p_WC, p_HP = real_array("p_WC", p_WC, VECTOR3), real_array("p_HP", p_HP, VECTOR3)
+    max_iterations = integer("max_iterations", max_iterations, 0)
+    tolerance = real_number("tolerance", tolerance, finite=False, what="a number >= 0")
+    if not tolerance >= 0.0:
+        raise IdentificationError(f"tolerance must be a number >= 0, got {tolerance}")
+    try:
+        return _gauss_newton(S, weight, R, p_WC, p_HP, max_iterations, tolerance)
+    except np.linalg.LinAlgError:
+        raise IdentificationError("S gives singular normal equations that cannot be solved") from None
+
+
+def _gauss_newton(S: np.ndarray, weight: float, R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray,
+                  max_iterations: int = 30, tolerance: float = 1e-12) -> EyeToHandEstimate:
+    """``refine`` unchecked (the identifier's own solves)."""
+    x = _pack_x(R, p_WC, p_HP)
     cost = float(x @ S @ x)
     J = np.zeros((N_UNKNOWNS, 9))
     J[9:15, 3:9] = np.eye(6)
@@ -243,18 +329,18 @@ def refine(
             # Near the optimum the cost's change is below its own round-off (x^T S x is a sum of
             # large terms that cancel), so a cost test cannot judge the step; Gauss-Newton's full
             # step is reliable there.
-            R = R @ so3_exp(delta[0:3])
+            R = R @ _so3_exp(delta[0:3])
             p_WC, p_HP = p_WC + delta[3:6], p_HP + delta[6:9]
-            x = pack_x(R, p_WC, p_HP)
+            x = _pack_x(R, p_WC, p_HP)
             cost = float(x @ S @ x)
             if size < tolerance:
                 break
             continue
         for _ in range(10):
-            R_new = R @ so3_exp(step * delta[0:3])
+            R_new = R @ _so3_exp(step * delta[0:3])
             p_WC_new = p_WC + step * delta[3:6]
             p_HP_new = p_HP + step * delta[6:9]
-            x_new = pack_x(R_new, p_WC_new, p_HP_new)
+            x_new = _pack_x(R_new, p_WC_new, p_HP_new)
             cost_new = float(x_new @ S @ x_new)
             if cost_new <= cost:
                 break
@@ -262,8 +348,8 @@ def refine(
         else:
             break  # no decrease along the Gauss-Newton direction: at the optimum (to round-off)
         R, p_WC, p_HP, x, cost = R_new, p_WC_new, p_HP_new, x_new, cost_new
-    R = nearest_rotation(R)  # against drift from many small products (no effect on the cost)
-    x = pack_x(R, p_WC, p_HP)
+    R = _nearest_rotation(R)  # against drift from many small products (no effect on the cost)
+    x = _pack_x(R, p_WC, p_HP)
     return EyeToHandEstimate(
         R_WC=R,
         p_WC=p_WC.copy(),
@@ -281,11 +367,9 @@ def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
     return X
 
 
-def _as_rotation_and_translation(X_WH: np.ndarray):
-    X_WH = np.asarray(X_WH, dtype=float)
-    if X_WH.shape != (4, 4):
-        raise IdentificationError(f"X_WH must be 4 x 4, got shape {X_WH.shape}")
-    return X_WH[:3, :3], X_WH[:3, 3]
+# A sample whose camera point and hand position have a squared norm sum below this has entries
+# below 1e100 (|R_WH| <= 1), so A^T A and its sum cannot overflow (the core's fast-path bound).
+_SMALL_SAMPLE = 1e200
 
 
 class EyeToHandIdentifier(FormulationIdentifier):
@@ -295,10 +379,12 @@ class EyeToHandIdentifier(FormulationIdentifier):
     Args:
         forgetting_factor: see ``SustainableIdentifier`` (1 = the paper's plain mean).
         criteria: convergence criteria (``default_criteria()`` if None).
+
+    Every method raises IdentificationError for an argument of the wrong type, shape or value.
     """
 
     def __init__(self, forgetting_factor: float = 1.0, criteria: ConvergenceCriteria | None = None):
-        super().__init__(N_UNKNOWNS, forgetting_factor, criteria or default_criteria())
+        super().__init__(N_UNKNOWNS, forgetting_factor, default_criteria() if criteria is None else criteria)
         A = self._A = np.zeros((M_ROWS, N_UNKNOWNS))
         # Views of A_t's (Eq. (35)) sample-dependent entries, so that ``add`` writes them in a few
         # calls: A[i, 3 k + i] = p_CP[k] (the c_k E blocks, k < 3), -R_WH, -p_WH.
@@ -309,21 +395,56 @@ class EyeToHandIdentifier(FormulationIdentifier):
         self._T = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
 
     def add(self, p_CP: np.ndarray, R_WH: np.ndarray, p_WH: np.ndarray) -> None:
-        """Adds one sample: the point measured in the camera frame (m) and the hand pose."""
-        A_c = self._A_c
-        A_c[0] = p_CP  # row 0 first, so that only a 3-vector fits, then copied to rows 1 and 2
+        """Adds one sample: the point measured in the camera frame (m) and the hand pose.
+
+        Raises:
+            IdentificationError: ``p_CP`` or ``p_WH`` is not a finite 3-vector, or ``R_WH`` not a
+                rotation matrix (``errors.ROTATION_TOLERANCE``). The state is then unchanged.
+        """
+        # The usual sample (float64 3-vectors) is written as it is; anything else is converted
+        # and checked first (a scalar or a 1-vector would broadcast into A_t).
+        if type(p_CP) is not np.ndarray or p_CP.shape != VECTOR3 or p_CP.dtype is not F64:
+            p_CP = real_array("p_CP", p_CP, VECTOR3, finite=False)
+        if type(p_WH) is not np.ndarray or p_WH.shape != VECTOR3 or p_WH.dtype is not F64:
+            p_WH = real_array("p_WH", p_WH, VECTOR3, finite=False)
+        A_c, A_R = self._A_c, self._A_R
+        A_c[0] = p_CP  # row 0 first, then copied to rows 1 and 2
         A_c[1:] = A_c[0]
-        np.negative(R_WH, out=self._A_R)
+        try:
+            np.negative(R_WH, out=A_R)
+        except (TypeError, ValueError):  # not a real array that fits 3 x 3
+            raise not_a_rotation("R_WH", R_WH) from None
         np.negative(p_WH, out=self._A_p)
-        self._core.add(self._A)
+        # Python floats: the rotation check (on -R_WH, which may have been broadcast into A_t) and
+        # the size of the sample in a few operations, in place of the core's array checks.
+        if not is_rotation(A_R.tolist(), -1.0):
+            raise not_a_rotation("R_WH", R_WH)
+        cx, cy, cz = p_CP.tolist()
+        px, py, pz = p_WH.tolist()
+        if cx * cx + cy * cy + cz * cz + px * px + py * py + pz * pz < _SMALL_SAMPLE:
+            self._core._add_product(self._A)
+            return
+        real_array("p_CP", p_CP, VECTOR3)  # NaN or inf: the error names the argument
+        real_array("p_WH", p_WH, VECTOR3)
+        try:
+            self._core.add(self._A)  # finite but huge: the core's checked path (overflow)
+        except IdentificationError:
+            raise IdentificationError("p_CP or p_WH is too large: A_t^T A_t overflows") from None
 
     def add_pose(self, p_CP: np.ndarray, X_WH: np.ndarray) -> None:
-        """Adds one sample with the hand pose as a 4 x 4 matrix."""
-        R_WH, p_WH = _as_rotation_and_translation(X_WH)
-        self.add(np.asarray(p_CP, dtype=float), R_WH, p_WH)
+        """Adds one sample with the hand pose as a 4 x 4 homogeneous transform (``add``'s
+        IdentificationError, or one for ``X_WH`` not a 4 x 4 transform)."""
+        X_WH = homogeneous_transform("X_WH", X_WH, rotation_block=False)
+        self.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
 
     def sample_error(self, p_CP, R_WH, p_WH, estimate: EyeToHandEstimate) -> float:
-        """``s_t = ||A_t x||^2`` (Eq. (2)), m^2: how well ``estimate`` explains a new sample."""
+        """``s_t = ||A_t x||^2`` (Eq. (2)), m^2: how well ``estimate`` explains a new sample.
+        IdentificationError unless ``p_CP``, ``R_WH``, ``p_WH`` are a real 3-vector, 3 x 3 matrix,
+        3-vector and ``estimate`` an EyeToHandEstimate (NaN or inf give a non-finite error)."""
+        p_CP = real_array("p_CP", p_CP, VECTOR3, finite=False)
+        R_WH = real_array("R_WH", R_WH, MATRIX3, finite=False)
+        p_WH = real_array("p_WH", p_WH, VECTOR3, finite=False)
+        estimate = instance("estimate", estimate, EyeToHandEstimate, "an EyeToHandEstimate")
         r = estimate.R_WC @ p_CP + estimate.p_WC - R_WH @ estimate.p_HP - p_WH
         return float(r @ r)
 
@@ -339,8 +460,10 @@ class EyeToHandIdentifier(FormulationIdentifier):
         run once, when first asked for.
 
         Never raises for degenerate data: too few or too similar samples give a "not converged"
-        verdict with the reason.
+        verdict with the reason. IdentificationError if ``refine_estimate`` is not a bool.
         """
+        if type(refine_estimate) is not bool:
+            refine_estimate = flag("refine_estimate", refine_estimate)
         cache = self._cached()
         if cache is None:
             cache = self._cache = [self._core._revision, self.criteria, self._solve_tls(), None]
@@ -355,13 +478,13 @@ class EyeToHandIdentifier(FormulationIdentifier):
         """The solution without refinement: the eigen-solve, the SO(3) projection, the verdict."""
         core = self._core
         n = core.num_samples
-        eigen = core.eigen(conditioning_transform(core._S, self._T)) if n > 0 else None
+        eigen = core.eigen(_conditioning_transform(core._S, self._T)) if n > 0 else None
         if eigen is None:
             reason = "no samples" if n == 0 else "statistic is not finite (overflow)"
             return EyeToHandSolution(None, 0.0, math.inf, math.inf, None, None,
                                      Verdict(False, reason), n)  # fmt: skip
         direction = eigen.direction
-        R, a, ssd, _ = projection_parts(direction[0:9])
+        R, a, ssd, _ = _projection_parts(direction[0:9])
         x = a * direction
         if a == 0.0 or not math.isfinite(sum(x.tolist())):
             verdict = Verdict(False, "the rotation block of v_N is zero: no rotation to identify")
@@ -375,13 +498,32 @@ class EyeToHandIdentifier(FormulationIdentifier):
         """``solution`` with its Gauss-Newton refinement (None if it is not finite)."""
         core, est = self._core, solution.projected
         with np.errstate(all="ignore"):  # absurd magnitudes: dropped below, never a NaN out
-            refined = refine(core._S, core.weight, est.R_WC, est.p_WC.copy(), est.p_HP.copy())
+            refined = _gauss_newton(core._S, core.weight, est.R_WC, est.p_WC.copy(), est.p_HP.copy())
         if not math.isfinite(refined.mean_squared_error + refined.x.sum()):
             return solution
         return dataclasses.replace(solution, refined=refined)
 
 
 # ---- several points at once (beyond the paper: the paper identifies from one point) -----------
+def _statistics(S_list) -> list[np.ndarray]:
+    """``S_list`` checked: a list or tuple (or a K x 16 x 16 array) of finite 16 x 16 statistics."""
+    if isinstance(S_list, np.ndarray) and S_list.ndim == 3:
+        S_list = list(S_list)
+    if not isinstance(S_list, (list, tuple)):
+        raise IdentificationError(f"S_list must be a list of 16 x 16 statistics, got {describe(S_list)}")
+    return [real_array(f"S_list[{k}]", S, (N_UNKNOWNS, N_UNKNOWNS)) for k, S in enumerate(S_list)]
+
+
+def _points(name: str, value, K: int) -> np.ndarray:
+    """``value`` checked as K finite points: a K x 3 array (or its 3 K entries), returned K x 3."""
+    what = f"a {K} x 3 array (one point per statistic)"
+    P = value if type(value) is np.ndarray and value.dtype is F64 else to_float_array(name, value, what)
+    if not (P.shape == (K, 3) or P.shape == (3 * K,)):
+        raise IdentificationError(f"{name} must be {what}, got {describe(value)}")
+    check_finite(name, P)
+    return P.reshape(K, 3)
+
+
 def refine_joint(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray,
                  max_iterations: int = 30, tolerance: float = 1e-10):
     """Gauss-Newton on SO(3) x R^3 x (R^3)^K of ``sum_k x_k^T S_k x_k`` (every point's geometric
@@ -389,9 +531,18 @@ def refine_joint(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP
     statistics alone: ``refine`` for K points fixed on the hand, which need not be seen in the same
     frames. The camera is what all of them must agree on, so its rotation is excited by the union of
     the points' views. Start from a single point's estimate (``p_HP``: K x 3). Returns
-    ``(R_WC, p_WC, p_HP)``, or None if the normal equations are singular (degenerate data)."""
+    ``(R_WC, p_WC, p_HP)``, or None if the normal equations are singular (degenerate data).
+    IdentificationError unless ``S_list`` is a list of finite 16 x 16 statistics, ``R`` a rotation
+    matrix, ``p_WC`` a finite 3-vector, ``p_HP`` K finite points, ``max_iterations`` an integer >= 0
+    and ``tolerance`` a number >= 0."""
+    S_list = _statistics(S_list)
     K = len(S_list)
-    R, p_WC, p_HP = R.copy(), np.array(p_WC, float), np.array(p_HP, float).reshape(K, 3)
+    R, p_WC = rotation("R", R).copy(), real_array("p_WC", p_WC, VECTOR3).copy()
+    p_HP = _points("p_HP", p_HP, K).copy()
+    max_iterations = integer("max_iterations", max_iterations, 0)
+    tolerance = real_number("tolerance", tolerance, finite=False, what="a number >= 0")
+    if not tolerance >= 0.0:
+        raise IdentificationError(f"tolerance must be a number >= 0, got {tolerance}")
     for _ in range(max_iterations):
         H, g = _joint_normal_equations(S_list, R, p_WC, p_HP)
         try:
@@ -400,12 +551,12 @@ def refine_joint(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP
             return None
         if not np.all(np.isfinite(delta)) or np.abs(delta).max() > 1e3:
             return None
-        R = R @ so3_exp(delta[0:3])
+        R = R @ _so3_exp(delta[0:3])
         p_WC = p_WC + delta[3:6]
         p_HP = p_HP + delta[6:].reshape(K, 3)
         if np.abs(delta).max() < tolerance:
             break
-    return nearest_rotation(R), p_WC, p_HP
+    return _nearest_rotation(R), p_WC, p_HP
 
 
 def _joint_normal_equations(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray):
@@ -420,7 +571,7 @@ def _joint_normal_equations(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.nd
     for k, S in enumerate(S_list):
         idx = np.r_[0:6, 6 + 3 * k: 9 + 3 * k]
         H[np.ix_(idx, idx)] += J.T @ S @ J
-        g[idx] += J.T @ (S @ pack_x(R, p_WC, p_HP[k]))
+        g[idx] += J.T @ (S @ _pack_x(R, p_WC, p_HP[k]))
     return H, g
 
 
@@ -437,10 +588,12 @@ def rotation_levers(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p
     moves little, the smallest lever is millimetres and the camera turns about the workspace
     (``hand_eye.yaml``, four runs: 6-9 mm at the first convergences, whose cameras were up to
     2.7 mm off; 25-30 mm a few seconds of babbling later, when the same points put the camera about
-    1 mm off). Zeros if the other unknowns are not determined."""
+    1 mm off). Zeros if the other unknowns are not determined. IdentificationError as for
+    ``refine_joint``."""
+    S_list = _statistics(S_list)
     K = len(S_list)
-    p_HP = np.asarray(p_HP, float).reshape(K, 3)
-    H, _ = _joint_normal_equations(S_list, R, np.asarray(p_WC, float), p_HP)
+    p_HP = _points("p_HP", p_HP, K)
+    H, _ = _joint_normal_equations(S_list, rotation("R", R), real_array("p_WC", p_WC, VECTOR3), p_HP)
     n_samples = sum(float(S[9, 9]) for S in S_list)  # A_t's p_WC block is I: S[9, 9] counts samples
     try:
         schur = H[:3, :3] - H[:3, 3:] @ np.linalg.solve(H[3:, 3:], H[3:, :3])
@@ -474,9 +627,13 @@ def position_given_rotation(S_list: list[np.ndarray], p_HP: np.ndarray, R_WC: np
     """The camera position that best explains the samples of K points whose ``p_HP`` is known
     (``S_k`` the raw statistics; ``p_HP``: K x 3) when its rotation ``R_WC`` is known too: Eq. (35)'s
     least squares in ``p_WC`` alone, the mean of ``R_WH p_HP + p_WH - R_WC p_CP`` over the samples.
-    None for no samples."""
+    None for no samples. IdentificationError unless ``S_list`` is a list of finite 16 x 16
+    statistics, ``p_HP`` as many finite points and ``R_WC`` a finite 3 x 3 matrix."""
+    S_list = _statistics(S_list)
+    p_HP = _points("p_HP", p_HP, len(S_list))
+    R_WC = real_array("R_WC", R_WC, MATRIX3)
     P, n = _known_points_statistic(S_list, p_HP)
-    return _position_given_rotation(P, n, np.asarray(R_WC, dtype=float)) if n > 0 else None
+    return _position_given_rotation(P, n, R_WC) if n > 0 else None
 
 
 def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):
@@ -492,21 +649,28 @@ def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):
     ``spread`` (m), the RMS distance of the camera-frame points from their principal line, says how
     well the samples pin the rotation (a turn about any axis moves the points by at least the angle
     times it; 0: the points on a line, where the turn about it is free; points in a plane pin it).
-    None for no samples."""
-    P, n = _known_points_statistic(S_list, p_HP)
+    None for no samples. IdentificationError unless ``S_list`` is a list of finite 16 x 16
+    statistics and ``p_HP`` as many finite points."""
+    S_list = _statistics(S_list)
+    P, n = _known_points_statistic(S_list, _points("p_HP", p_HP, len(S_list)))
     if not n > 0:
         return None
     # p_WC = -(P_tR vec R + P_t1) / n; the cost's term linear in vec R is then 2 g^T vec R.
     g = P[0:9, 12] - P[0:9, 9:12] @ P[9:12, 12] / n
-    R = nearest_rotation(-g.reshape(3, 3, order="F"))  # max tr(-G^T R) on SO(3)
+    R = _nearest_rotation(-g.reshape(3, 3, order="F"))  # max tr(-G^T R) on SO(3)
     p_WC = _position_given_rotation(P, n, R)
     scatter = P[0:9:3, 0:9:3] - np.outer(P[0:9:3, 9], P[0:9:3, 9]) / n  # n C: P_RR = (sum a a^T) x I
-    return R, p_WC, spread_off_line(scatter / n)
+    return R, p_WC, _spread_off_line(scatter / n)
 
 
 def spread_off_line(covariance: np.ndarray) -> float:
     """The RMS distance (m) of points from their principal line, from their 3 x 3 covariance:
-    the root of its two smallest eigenvalues' sum (0 for points on a line)."""
+    the root of its two smallest eigenvalues' sum (0 for points on a line). IdentificationError
+    unless ``covariance`` is a finite 3 x 3 matrix."""
+    return _spread_off_line(real_array("covariance", covariance, MATRIX3))
+
+
+def _spread_off_line(covariance: np.ndarray) -> float:
     smallest = np.linalg.eigvalsh(covariance)[:2]
     return math.sqrt(max(float(smallest.sum()), 0.0))
 
@@ -537,8 +701,8 @@ def _scene_registration(R, p, b0, q0, b1, q1, far, inliers, used, steps: int = 3
     residual is weighted by its robust scale (``_robust_scale``; the depth's scaled by ``z^2``), and depth
     misfits over three scales are left out (an anchor on a moving thing, a depth edge)."""
     z = np.maximum(np.linalg.norm(q1, axis=1), 0.1)
-    b1_x = np.array([skew(v) for v in b1])  # the Jacobians' cross-product matrices, fixed
-    q1_x = np.array([skew(v) for v in np.nan_to_num(q1)])
+    b1_x = np.array([_skew(v) for v in b1])  # the Jacobians' cross-product matrices, fixed
+    q1_x = np.array([_skew(v) for v in np.nan_to_num(q1)])
     for _ in range(steps):
         c = np.where(far[:, None], b0, q0 - p)
         norm = np.linalg.norm(c, axis=1, keepdims=True)
@@ -561,8 +725,24 @@ def _scene_registration(R, p, b0, q0, b1, q1, far, inliers, used, steps: int = 3
                             (J_d[keep] * w_d[:, None, None]).reshape(-1, 6)])
         b = np.concatenate([(r_b[inliers] / s_b).ravel(), (r_d[keep] * w_d[:, None]).ravel()])
         delta = -np.linalg.lstsq(A, b, rcond=None)[0]
-        R, p = R @ so3_exp(delta[:3]), p + delta[3:]
+        R, p = R @ _so3_exp(delta[:3]), p + delta[3:]
     return R, p
+
+
+def _anchors(name: str, value, bearings: bool) -> np.ndarray:
+    """``camera_after_turn``'s per-anchor rows checked, K x 3 (or their 3 K entries): bearings finite
+    and non-zero; points non-zero where finite (NaN or inf rows: no depth)."""
+    what = "a K x 3 array"
+    A = value if type(value) is np.ndarray and value.dtype is F64 else to_float_array(name, value, what)
+    if not (A.ndim == 2 and A.shape[1] == 3) and not (A.ndim == 1 and A.size % 3 == 0):
+        raise IdentificationError(f"{name} must be a K x 3 array, got {describe(value)}")
+    A = A.reshape(-1, 3)
+    if bearings:
+        check_finite(name, A)
+    finite = np.all(np.isfinite(A), axis=1)
+    if np.any(finite & ~np.any(A != 0.0, axis=1)):
+        raise IdentificationError(f"{name} must have non-zero rows, got a zero row")
+    return A
 
 
 def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: np.ndarray,
@@ -591,16 +771,26 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
     find the tool's points again). Anchors
     whose direction misfits by more than three times the median are left out (a feature of the
     moving arm, a track that jumped), each fit. Returns a ``CameraAfterTurn``, or None with fewer
-    than ``min_points`` anchors left."""
-    b0, b1 = np.asarray(b0, float).reshape(-1, 3), np.asarray(b1, float).reshape(-1, 3)
-    q0 = np.asarray(q0, float).reshape(-1, 3)
-    q1 = np.full_like(q0, np.nan) if q1 is None or np.size(q1) == 0 else np.asarray(q1, float).reshape(-1, 3)
+    than ``min_points`` anchors left.
+
+    IdentificationError unless ``R_WC0`` is a finite 3 x 3 matrix, ``p_WC0`` a finite 3-vector,
+    ``b0`` and ``b1`` K x 3 arrays of finite non-zero bearings, ``q0`` (and ``q1`` unless None or
+    empty) a K x 3 array whose finite rows are non-zero, ``S_list`` a list of finite 16 x 16
+    statistics with as many finite ``p_HP`` points, and ``min_points``, ``iterations`` integers >= 1."""
+    R_WC0, p_WC0 = real_array("R_WC0", R_WC0, MATRIX3), real_array("p_WC0", p_WC0, VECTOR3)
+    b0, b1 = _anchors("b0", b0, bearings=True), _anchors("b1", b1, bearings=True)
+    q0 = _anchors("q0", q0, bearings=False)
+    q1 = None if q1 is None else _anchors("q1", q1, bearings=False)
+    if q1 is None or q1.size == 0:
+        q1 = np.full_like(q0, np.nan)
     if not (b1.shape == q0.shape == q1.shape == b0.shape):
-        raise ValueError(f"camera_after_turn: b0, q0, b1 and q1 must be K x 3 alike, got {b0.shape}, "
-                         f"{q0.shape}, {b1.shape}, {q1.shape}")
+        raise IdentificationError(f"camera_after_turn: b0, q0, b1 and q1 must be K x 3 alike, got "
+                                  f"{b0.shape}, {q0.shape}, {b1.shape}, {q1.shape}")
+    S_list = _statistics(S_list)
+    p_HP = _points("p_HP", p_HP, len(S_list))
+    min_points, iterations = integer("min_points", min_points, 1), integer("iterations", iterations, 1)
     far = ~np.all(np.isfinite(q0), axis=1)
     deep = ~far & np.all(np.isfinite(q1), axis=1)  # depth on both sides
-    R_WC0, p_WC0 = np.asarray(R_WC0, float), np.asarray(p_WC0, float)
     P, n = _known_points_statistic(S_list, p_HP)
     if b0.shape[0] < min_points:
         return None
@@ -611,7 +801,7 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
         c = np.where(far[:, None], b0, q0 - p_C0C1)
         c /= np.linalg.norm(c, axis=1, keepdims=True)
         for _ in range(2):  # fit, leave out the misfits, fit again
-            R_C0C1 = nearest_rotation(c[inliers].T @ b1[inliers])
+            R_C0C1 = _nearest_rotation(c[inliers].T @ b1[inliers])
             angle = np.linalg.norm(np.cross(b1 @ R_C0C1.T, c), axis=1)
             inliers = angle <= max(3.0 * float(np.median(angle)), 1e-5)
             if np.count_nonzero(inliers) < min_points:

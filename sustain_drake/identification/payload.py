@@ -21,6 +21,9 @@ reading is the wrench the payload applies on it (the opposite sign) must be nega
 
 Quasi-static: the formulation ignores the payload's acceleration, so samples should be taken while
 the sensor moves slowly (the paper's §4.4 does the same).
+
+Every public function and method raises ``IdentificationError`` (a ``ValueError``, see ``errors``)
+with a one-line message for an argument of the wrong type, shape or value.
 """
 
 from __future__ import annotations
@@ -31,11 +34,21 @@ from typing import ClassVar
 
 import numpy as np
 
-from sustain_drake.identification.rotation import skew
+from sustain_drake.identification.errors import (
+    F64,
+    MATRIX3,
+    VECTOR3,
+    is_rotation,
+    not_a_rotation,
+    out_array,
+    real_array,
+)
+from sustain_drake.identification.rotation import _skew
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     EigenSolution,
     FormulationIdentifier,
+    IdentificationError,
     SolutionProperties,
     SustainableIdentifier,
     Verdict,
@@ -53,14 +66,29 @@ def default_criteria() -> ConvergenceCriteria:
     return ConvergenceCriteria(max_expected_rms=0.3, min_gap_ratio=10.0, max_ssd=None, min_samples=10)
 
 
+_WRENCH = (6,)
+# Samples with a squared norm below this have entries below 1e100: A^T A cannot overflow.
+_SMALL_SAMPLE = 1e200
+
+
 def build_A(wrench_K: np.ndarray, R_WK: np.ndarray, g_W: np.ndarray, out=None) -> np.ndarray:
-    """``A_t`` of Eq. (37) (6 x 5) for one wrench sample ``[tau_K; f_K]``."""
+    """``A_t`` of Eq. (37) (6 x 5) for one wrench sample ``[tau_K; f_K]`` (written into ``out``, a
+    float64 6 x 5 array, if given). IdentificationError unless ``wrench_K``, ``R_WK``, ``g_W`` are a
+    real 6-vector, 3 x 3 matrix and 3-vector (NaN and inf are carried into ``A_t``)."""
+    wrench_K = real_array("wrench_K", wrench_K, _WRENCH, finite=False)
+    R_WK = real_array("R_WK", R_WK, MATRIX3, finite=False)
+    g_W = real_array("g_W", g_W, VECTOR3, finite=False)
+    out = out_array("out", out, (M_ROWS, N_UNKNOWNS))
+    return _build_A(wrench_K, R_WK, g_W, out)
+
+
+def _build_A(wrench_K: np.ndarray, R_WK: np.ndarray, g_W: np.ndarray, out=None) -> np.ndarray:
     A = np.zeros((M_ROWS, N_UNKNOWNS)) if out is None else out
     tau = wrench_K[0:3]
     f = wrench_K[3:6]
     A[0:3, 0] = R_WK @ f
     A[0:3, 4] = g_W
-    A[3:6, 1:4] = -skew(f)
+    A[3:6, 1:4] = -_skew(f)
     A[3:6, 4] = -tau
     return A
 
@@ -102,6 +130,8 @@ class PayloadIdentifier(FormulationIdentifier):
         gravity_W: gravity in the world frame, m/s^2.
         forgetting_factor: see ``SustainableIdentifier``.
         criteria: convergence criteria (``default_criteria()`` if None).
+
+    Every method raises IdentificationError for an argument of the wrong type, shape or value.
     """
 
     def __init__(
@@ -110,20 +140,46 @@ class PayloadIdentifier(FormulationIdentifier):
         forgetting_factor: float = 1.0,
         criteria: ConvergenceCriteria | None = None,
     ):
-        self.g_W = np.array(gravity_W, dtype=float)
-        if self.g_W.shape != (3,) or not np.all(np.isfinite(self.g_W)) or not self.g_W.any():
-            raise ValueError(f"gravity_W must be a finite non-zero 3-vector, got {gravity_W}")
-        super().__init__(N_UNKNOWNS, forgetting_factor, criteria or default_criteria())
+        self.g_W = real_array("gravity_W", gravity_W, VECTOR3, what="a finite non-zero 3-vector").copy()
+        if not self.g_W.any():
+            raise IdentificationError("gravity_W must be a finite non-zero 3-vector, got zeros")
+        super().__init__(N_UNKNOWNS, forgetting_factor, default_criteria() if criteria is None else criteria)
         self._A = np.zeros((M_ROWS, N_UNKNOWNS))
+        self._small_gravity = float(self.g_W @ self.g_W) < _SMALL_SAMPLE
 
     def add(self, wrench_K: np.ndarray, R_WK: np.ndarray) -> None:
-        """Adds one quasi-static sample: the wrench ``[tau_K; f_K]`` and the sensor orientation."""
+        """Adds one quasi-static sample: the wrench ``[tau_K; f_K]`` and the sensor orientation.
+
+        Raises:
+            IdentificationError: ``wrench_K`` is not a finite 6-vector (or so large that ``A^T A``
+                overflows), or ``R_WK`` not a rotation matrix (``errors.ROTATION_TOLERANCE``). The
+                state is then unchanged.
+        """
+        if type(wrench_K) is not np.ndarray or wrench_K.shape != _WRENCH or wrench_K.dtype is not F64:
+            wrench_K = real_array("wrench_K", wrench_K, _WRENCH, finite=False)
+        if type(R_WK) is not np.ndarray or R_WK.shape != MATRIX3 or R_WK.dtype is not F64:
+            R_WK = real_array("R_WK", R_WK, MATRIX3, what="a 3 x 3 rotation matrix", finite=False)
+        if not is_rotation(R_WK.tolist()):
+            raise not_a_rotation("R_WK", R_WK)
+        # Python floats: a wrench whose entries are below 1e100 (and gravity too) makes A_t's entries
+        # so (|R_WK| <= 1), so A^T A cannot overflow: the core's fast path without its array checks.
+        tx, ty, tz, fx, fy, fz = wrench_K.tolist()
+        if tx * tx + ty * ty + tz * tz + fx * fx + fy * fy + fz * fz < _SMALL_SAMPLE and self._small_gravity:
+            self._core._add_product(_build_A(wrench_K, R_WK, self.g_W, self._A))
+            return
         with np.errstate(invalid="ignore", over="ignore"):  # an absurd wrench: the core refuses its A
-            A = build_A(wrench_K, R_WK, self.g_W, self._A)
-        self._core.add(A)
+            A = _build_A(wrench_K, R_WK, self.g_W, self._A)
+        try:
+            self._core.add(A)
+        except IdentificationError:
+            real_array("wrench_K", wrench_K, _WRENCH)  # NaN or inf: the error names the argument
+            raise IdentificationError("wrench_K is too large: A_t^T A_t overflows") from None
 
     def sample_error(self, wrench_K: np.ndarray, R_WK: np.ndarray, x: np.ndarray) -> float:
-        """``s_t = ||A_t x||^2`` (Eq. (2)) for a new sample under the estimate ``x``."""
+        """``s_t = ||A_t x||^2`` (Eq. (2)) for a new sample under the estimate ``x``.
+        IdentificationError unless ``wrench_K``, ``R_WK``, ``x`` are a real 6-vector, 3 x 3 matrix
+        and 5-vector (NaN or inf give a non-finite error)."""
+        x = real_array("x", x, (N_UNKNOWNS,), finite=False)
         return SustainableIdentifier.sample_error(build_A(wrench_K, R_WK, self.g_W), x)
 
     def solve(self) -> PayloadSolution:

@@ -1,5 +1,9 @@
 """Rotation helpers: the §3.2 projection of an identified 3 x 3 block onto SO(3) (Challis's method,
-Eqs. (14)-(21)), and the small so(3) maps the Gauss-Newton refinement needs. Pure numpy."""
+Eqs. (14)-(21)), and the small so(3) maps the Gauss-Newton refinement needs. Pure numpy.
+
+Each public helper raises ``IdentificationError`` (a ``ValueError``, see ``errors``) for an argument
+of the wrong type, shape or value; the identifiers' own calls go to unchecked twins (``_so3_exp``,
+``_nearest_rotation``, ...) on arrays they built themselves."""
 
 from __future__ import annotations
 
@@ -8,24 +12,41 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
+from sustain_drake.identification.errors import MATRIX3, VECTOR3, all_finite, real_array, rotation
+
 _E3 = np.eye(3)
 
 
 def det3(X: np.ndarray) -> float:
-    """Determinant of a 3 x 3 matrix (cofactor expansion: much cheaper than np.linalg.det)."""
+    """Determinant of a 3 x 3 matrix (cofactor expansion: much cheaper than np.linalg.det).
+    IdentificationError unless ``X`` is a real 3 x 3 matrix."""
+    return _det3(real_array("X", X, MATRIX3, finite=False))
+
+
+def _det3(X: np.ndarray) -> float:
     a, b, c, d, e, f, g, h, i = X.ravel().tolist()
     return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 def skew(w: np.ndarray) -> np.ndarray:
-    """``[w x]``: the matrix with ``skew(w) @ v == np.cross(w, v)``."""
+    """``[w x]``: the matrix with ``skew(w) @ v == np.cross(w, v)``. IdentificationError unless
+    ``w`` is a real 3-vector."""
+    return _skew(real_array("w", w, VECTOR3, finite=False))
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
 def so3_exp(w: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula: the rotation by ``|w|`` radians about ``w``."""
+    """Rodrigues' formula: the rotation by ``|w|`` radians about ``w``. IdentificationError unless
+    ``w`` is a finite 3-vector."""
+    return _so3_exp(real_array("w", w, VECTOR3))
+
+
+def _so3_exp(w: np.ndarray) -> np.ndarray:
     theta = float(np.sqrt(w @ w))
-    K = skew(w)
+    K = _skew(w)
     if theta < 1e-8:
         # Second-order Taylor expansion; exact to round-off for such small angles.
         return _E3 + K + 0.5 * K @ K
@@ -33,7 +54,9 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 
 
 def rotation_angle(R: np.ndarray) -> float:
-    """The angle of a rotation matrix in radians (robust near 0 and pi)."""
+    """The angle of a rotation matrix in radians (robust near 0 and pi). IdentificationError
+    unless ``R`` is a rotation matrix (``errors.ROTATION_TOLERANCE``)."""
+    R = rotation("R", R)
     c = np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)
     s = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
     return float(np.arctan2(s, c))
@@ -68,18 +91,30 @@ def project_to_rotation(x9: np.ndarray) -> RotationProjection:
     SSD follow from the singular values alone::
 
         a = sum(s) / sum(s^2),    SSD = ||a R^T X_hat - E||_F^2 = 3 - sum(s)^2 / sum(s^2).
+
+    IdentificationError unless ``x9`` is a real 9-vector (NaN or inf give the identity with scale 0
+    and SSD inf).
     """
     return RotationProjection(*projection_parts(x9))
 
 
 def projection_parts(x9: np.ndarray) -> tuple[np.ndarray, float, float, float]:
-    """``project_to_rotation``'s ``(R, scale, ssd, sign)`` as a tuple (it runs at every solve of the
-    streaming identifier, so it makes as few Python calls as it can)."""
+    """``project_to_rotation``'s ``(R, scale, ssd, sign)`` as a tuple. IdentificationError unless
+    ``x9`` is a real 9-vector."""
+    x9 = real_array("x9", x9, (9,), finite=False)
+    if not all_finite(x9):  # LAPACK's dgesvd never returns on a NaN
+        return _E3.copy(), 0.0, float("inf"), 1.0
+    return _projection_parts(x9)
+
+
+def _projection_parts(x9: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+    """``projection_parts`` unchecked, for a finite ``x9`` (it runs at every solve of the streaming
+    identifier, so it makes as few Python calls as it can)."""
     U, sv, Vt, info = lapack.dgesvd(x9.reshape(3, 3, order="F"))
     if info != 0:  # only for non-finite input; keep the contract "R is a rotation"
         return _E3.copy(), 0.0, float("inf"), 1.0
     R = np.dot(U, Vt)
-    if det3(U) * det3(Vt) > 0.0:
+    if _det3(U) * _det3(Vt) > 0.0:
         sign = 1.0
     else:
         sign = -1.0
@@ -95,6 +130,11 @@ def projection_parts(x9: np.ndarray) -> tuple[np.ndarray, float, float, float]:
 def nearest_rotation(M: np.ndarray) -> np.ndarray:
     """The proper rotation ``R`` maximising ``trace(R^T M)`` (orthogonal Procrustes, Kabsch's
     determinant fix): for ``M = sum_i a_i b_i^T`` the rotation taking the ``b_i`` nearest the
-    ``a_i``; for ``M`` near a rotation, its re-orthonormalisation."""
-    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=float))
+    ``a_i``; for ``M`` near a rotation, its re-orthonormalisation. IdentificationError unless ``M``
+    is a finite 3 x 3 matrix."""
+    return _nearest_rotation(real_array("M", M, MATRIX3))
+
+
+def _nearest_rotation(M: np.ndarray) -> np.ndarray:
+    U, _, Vt = np.linalg.svd(M)
     return U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt

@@ -19,6 +19,9 @@ are those of ``C'``; ``x = a T v'_N`` and the expected mean squared error is sti
 All state lives in one flat float64 vector (``state``), so that a Drake system can keep it in its
 context and contexts can be cloned.
 
+Bad arguments raise ``IdentificationError`` (a ``ValueError``, see ``errors``) with a one-line
+message naming the argument.
+
 This module is pure numpy/scipy (no pydrake).
 """
 
@@ -30,15 +33,25 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
+from sustain_drake.identification.errors import (
+    F64,
+    IdentificationError,
+    check_finite,
+    describe,
+    instance,
+    integer,
+    real_array,
+    real_number,
+    to_float_array,
+)
+
 # Eigenvalues below this fraction of lambda_1 are taken as exactly zero (round-off of a 16 x 16
 # symmetric eigen-solver in float64 is ~1e-16 lambda_1).
 NULL_EIGENVALUE_RTOL = 1e-12
 
-
-class IdentificationError(ValueError):
-    """A sample or an input array that cannot be used (wrong shape, NaN, inf, not a rotation).
-
-    It is a ``ValueError`` with a one-line message meant for the user."""
+# The largest N a SustainableIdentifier accepts (its state is N^2 + 2 floats; the formulations
+# have 16 and 5).
+MAX_UNKNOWNS = 1000
 
 
 @dataclass(frozen=True)
@@ -56,6 +69,8 @@ class ConvergenceCriteria:
             this (paper: 0.1). ``None`` for formulations without a rotation.
         min_samples: fewer samples than this is never converged (with exactly as many equations
             as unknowns the fit is exact whatever the noise, and ``lambda_N = 0`` says nothing).
+
+    Raises IdentificationError for a setting of the wrong type or out of its range.
     """
 
     max_expected_rms: float
@@ -64,14 +79,17 @@ class ConvergenceCriteria:
     min_samples: int = 10
 
     def __post_init__(self):
-        if not (self.max_expected_rms > 0 and math.isfinite(self.max_expected_rms)):
-            raise ValueError(f"max_expected_rms must be positive, got {self.max_expected_rms}")
-        if not self.min_gap_ratio >= 1:
-            raise ValueError(f"min_gap_ratio must be >= 1, got {self.min_gap_ratio}")
-        if self.max_ssd is not None and not self.max_ssd > 0:
-            raise ValueError(f"max_ssd must be positive or None, got {self.max_ssd}")
-        if not self.min_samples >= 1:
-            raise ValueError(f"min_samples must be >= 1, got {self.min_samples}")
+        rms = real_number("max_expected_rms", self.max_expected_rms, what="a positive number")
+        if not rms > 0:
+            raise IdentificationError(f"max_expected_rms must be positive, got {rms}")
+        gap = real_number("min_gap_ratio", self.min_gap_ratio, finite=False, what="a number >= 1")
+        if not gap >= 1:
+            raise IdentificationError(f"min_gap_ratio must be >= 1, got {gap}")
+        if self.max_ssd is not None:
+            ssd = real_number("max_ssd", self.max_ssd, finite=False, what="a positive number or None")
+            if not ssd > 0:
+                raise IdentificationError(f"max_ssd must be positive or None, got {ssd}")
+        integer("min_samples", self.min_samples, 1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,8 +155,19 @@ def judge(
     """Applies the paper's criteria (a), (b), (c) in an order that gives the most useful reason.
 
     Never judges from ``lambda_N`` alone: with too few or too similar samples ``lambda_N`` is 0
-    because the null space has several dimensions, and that is "not converged".
+    because the null space has several dimensions, and that is "not converged". Raises
+    IdentificationError for an argument of the wrong type.
     """
+    if not (type(criteria) is ConvergenceCriteria and type(num_samples) is int
+            and (eigen is None or type(eigen) is EigenSolution) and type(expected_rms) is float
+            and (constraint_problem is None or type(constraint_problem) is str)
+            and (ssd is None or type(ssd) is float) and type(rms_unit) is str):  # fmt: skip
+        # Not the solves' own types: numpy numbers and subclasses pass, anything else is an error.
+        _check_judge_arguments(criteria, num_samples, eigen, expected_rms, constraint_problem, ssd, rms_unit)
+    return _judge(criteria, num_samples, eigen, expected_rms, constraint_problem, ssd, rms_unit)
+
+
+def _judge(criteria, num_samples, eigen, expected_rms, constraint_problem, ssd, rms_unit) -> Verdict:
     if eigen is None:
         return Verdict(False, "no samples")
     if num_samples < criteria.min_samples:
@@ -167,6 +196,18 @@ def judge(
     return Verdict(True, "converged")
 
 
+def _check_judge_arguments(criteria, num_samples, eigen, expected_rms, constraint_problem, ssd, rms_unit):
+    """IdentificationError naming the first argument of ``judge`` of the wrong type."""
+    instance("criteria", criteria, ConvergenceCriteria, "a ConvergenceCriteria")
+    integer("num_samples", num_samples, 0)
+    instance("eigen", eigen, EigenSolution, "an EigenSolution or None", optional=True)
+    real_number("expected_rms", expected_rms, finite=False)
+    instance("constraint_problem", constraint_problem, str, "a string or None", optional=True)
+    if ssd is not None:
+        real_number("ssd", ssd, finite=False, what="a real number or None")
+    instance("rms_unit", rms_unit, str, "a string")
+
+
 class SustainableIdentifier:
     """Accumulates ``S = sum w A_t^T A_t`` in O(N^2) per sample and solves it at any time (§3.1).
 
@@ -174,18 +215,19 @@ class SustainableIdentifier:
     from the statistic itself (its entries hold the running sums they need).
 
     Args:
-        num_unknowns: N.
+        num_unknowns: N (2 to ``MAX_UNKNOWNS``).
         forgetting_factor: ``f`` in (0, 1]; each new sample first multiplies the statistic by
             ``f``. 1 (the default) is the paper's plain mean.
+
+    Every method raises IdentificationError for an argument of the wrong type, shape or value.
     """
 
     def __init__(self, num_unknowns: int, forgetting_factor: float = 1.0):
-        if num_unknowns < 2:
-            raise ValueError(f"num_unknowns must be >= 2, got {num_unknowns}")
-        if not 0.0 < forgetting_factor <= 1.0:
-            raise ValueError(f"forgetting_factor must be in (0, 1], got {forgetting_factor}")
-        self._N = int(num_unknowns)
-        self._forgetting = float(forgetting_factor)
+        self._N = integer("num_unknowns", num_unknowns, 2, MAX_UNKNOWNS)
+        forgetting = real_number("forgetting_factor", forgetting_factor, what="a number in (0, 1]")
+        if not 0.0 < forgetting <= 1.0:
+            raise IdentificationError(f"forgetting_factor must be in (0, 1], got {forgetting}")
+        self._forgetting = forgetting
         # Layout: [S (N*N, row-major) | n_eff | count]. Everything but the count is scaled by the
         # forgetting factor, so it is one contiguous slice.
         n2 = self._N * self._N
@@ -215,10 +257,13 @@ class SustainableIdentifier:
         return self._state.copy()
 
     def set_state(self, state: np.ndarray) -> None:
-        state = np.asarray(state, dtype=float)
-        if state.shape != self._state.shape:
-            raise ValueError(f"state must have shape {self._state.shape}, got {state.shape}")
-        self._state[:] = state
+        """Replaces the whole state (``state``'s layout). Raises IdentificationError unless ``state``
+        is a real vector of ``state_size`` (NaN and inf pass: an overflowed statistic round-trips)."""
+        array = state if type(state) is np.ndarray and state.dtype is F64 else to_float_array(
+            "state", state, "a vector")
+        if array.shape != self._state.shape:
+            raise IdentificationError(f"state must have shape {self._state.shape}, got {describe(state)}")
+        self._state[:] = array
         self._revision += 1
 
     @property
@@ -264,11 +309,11 @@ class SustainableIdentifier:
 
     # ---- samples --------------------------------------------------------------------------
     def add(self, A: np.ndarray) -> None:
-        """Adds one sample's ``A_t`` (M x N). O(N^2) time, no growth.
+        """Adds one sample's ``A_t`` (M x N, M >= 1). O(N^2) time, no growth.
 
         Raises:
-            IdentificationError: ``A`` has the wrong width or is not finite. The state is then
-                unchanged.
+            IdentificationError: ``A`` is not a real M x N matrix, or it is not finite (or
+                ``A^T A`` overflows). The state is then unchanged.
         """
         AtA = self._AtA
         try:
@@ -278,25 +323,41 @@ class SustainableIdentifier:
             small = largest * largest * A.shape[0] * AtA.size < 1e300
             if small:
                 np.dot(A.T, A, out=AtA)  # float64 with N columns: straight into the buffer
-        except ValueError:  # another dtype or shape, or no rows: the checked path
+        except (ValueError, TypeError, AttributeError, IndexError):  # another type, dtype, shape: checked
             small = False
         if not small:
+            A = self._checked_sample(A)
             # One scalar check catches NaN, inf and overflow in A^T A (a NaN or inf makes the sum
             # non-finite), before anything is committed to the state; numpy's warnings are
             # replaced by that one clear error.
             with np.errstate(over="ignore", invalid="ignore"):
                 try:
                     np.dot(A.T, A, out=AtA)
-                except ValueError:  # another dtype or shape: the general product
-                    product = A.T @ A
-                    if product.shape != AtA.shape:
-                        raise IdentificationError(
-                            f"A_t must have {self._N} columns, got shape {A.shape}"
-                        ) from None
-                    AtA[...] = product
+                except ValueError:  # another dtype: the general product
+                    AtA[...] = A.T @ A
                 total = AtA.sum()
             if not math.isfinite(total):
                 raise IdentificationError("sample is not finite (NaN, inf or overflow)")
+        self._commit()
+
+    def _checked_sample(self, A) -> np.ndarray:
+        """``A`` as a real array with N columns and a row at least (an array of integers or floats
+        is kept as it is), else IdentificationError."""
+        what = f"an M x {self._N} matrix (M >= 1 rows, {self._N} columns)"
+        if not (isinstance(A, np.ndarray) and A.dtype.kind in "iuf"):
+            A = to_float_array("A_t", A, what)
+        if A.ndim != 2 or A.shape[1] != self._N or A.shape[0] == 0:
+            raise IdentificationError(f"A_t must be {what}, got shape {A.shape}")
+        return A
+
+    def _add_product(self, A: np.ndarray) -> None:
+        """``add`` for a float64 M x N ``A`` whose entries the caller has checked to be finite and
+        below 1e100 in size (``add``'s fast path without its check)."""
+        np.dot(A.T, A, out=self._AtA)
+        self._commit()
+
+    def _commit(self) -> None:
+        """Adds the increment ``[A^T A | 1 | 1]`` to the state (after forgetting)."""
         if self._forgetting != 1.0:
             self._weighted *= self._forgetting
         self._state += self._increment  # S += A^T A, n_t += 1, count += 1
@@ -307,17 +368,28 @@ class SustainableIdentifier:
         """Eigen-decomposes ``C' = T^T C T`` (``T``, the conditioning transform with
         ``x = T x'``, defaults to the identity).
 
-        Returns None before any sample, or when the statistic is not finite (overflow).
+        Returns None before any sample, or when the statistic is not finite (overflow). Raises
+        IdentificationError unless ``T`` is None or a real N x N matrix, finite when the statistic
+        is (checked only when the solve fails, so it costs the formulations' solves nothing).
         """
+        if T is not None and not (type(T) is np.ndarray and T.dtype is F64 and T.shape == self._S.shape):
+            T = real_array("T", T, self._S.shape, finite=False)
         n = float(self._state[self._n_index])
         if n <= 0.0:
             return None
+        eigen = self._eigen(n, T)
+        if eigen is None and T is not None and np.isfinite(self._S).all():
+            check_finite("T", T)
+        return eigen
+
+    def _eigen(self, n: float, T: np.ndarray | None) -> EigenSolution | None:
+        """``eigen`` after its checks, with ``n > 0`` the weight."""
         if T is None:
             C, overwrite = self._S, 0
         else:
             try:
                 C = np.dot(np.dot(T.T, self._S, out=self._TtS), T)  # the same products as T.T @ S @ T
-            except ValueError:  # T not float64 (or the wrong shape: matmul's own error)
+            except ValueError:  # T not C-contiguous float64 (a view): the general product
                 C = T.T @ self._S @ T
             overwrite = 1
         # C is symmetric PSD, so a symmetric eigen-solver is the right tool, not a general SVD.
@@ -344,12 +416,23 @@ class SustainableIdentifier:
 
     @staticmethod
     def sample_error(A: np.ndarray, x: np.ndarray) -> float:
-        """``s_t = ||A_t x||^2``, Eq. (2): the error of one sample under an estimate ``x``."""
+        """``s_t = ||A_t x||^2``, Eq. (2): the error of one sample under an estimate ``x``.
+
+        Raises IdentificationError unless ``A`` is a real M x N matrix and ``x`` a real N-vector
+        (NaN or inf entries give a non-finite error, not an exception)."""
+        if not (type(A) is np.ndarray and type(x) is np.ndarray and A.dtype is F64 and x.dtype is F64
+                and A.ndim == 2 and x.ndim == 1 and A.shape[1] == x.shape[0]):  # fmt: skip
+            A = real_array("A", A, (None, None), finite=False, what="an M x N matrix")
+            x = real_array("x", x, (A.shape[1],), finite=False)
         r = A @ x
         return float(r @ r)
 
     def mean_squared_error(self, x: np.ndarray) -> float:
-        """``S_t = x^T C_t x``, Eq. (3): the mean of ``s_t`` over the accumulated samples."""
+        """``S_t = x^T C_t x``, Eq. (3): the mean of ``s_t`` over the accumulated samples.
+
+        Raises IdentificationError before any sample, or unless ``x`` is a real N-vector (NaN or
+        inf entries give a non-finite result)."""
+        x = real_array("x", x, (self._N,), finite=False)
         n = self.weight
         if n <= 0.0:
             raise IdentificationError("no samples to compute a mean squared error from")
@@ -368,7 +451,7 @@ class FormulationIdentifier:
 
     def __init__(self, num_unknowns: int, forgetting_factor: float, criteria: ConvergenceCriteria):
         self._core = SustainableIdentifier(num_unknowns, forgetting_factor)
-        self.criteria = criteria
+        self.criteria = instance("criteria", criteria, ConvergenceCriteria, "a ConvergenceCriteria or None")
         # [core revision, criteria, solution, refined solution or None] of the last solve.
         self._cache: list | None = None
 
@@ -393,6 +476,7 @@ class FormulationIdentifier:
         return self._core.state
 
     def set_state(self, state: np.ndarray) -> None:
+        """The core's ``set_state`` (IdentificationError unless ``state`` is a real vector of its size)."""
         self._core.set_state(state)
 
     def reset(self) -> None:

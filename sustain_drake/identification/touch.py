@@ -14,6 +14,9 @@ INTO the surface: ``n_out . F_env < 0``, i.e. ``n_out . f_c > 0``.
 
 Shapes are given in their own frame G (posed in K by ``X_KG``): a box centred on G with
 half-extents, a cylinder along G's z axis centred on G, a sphere centred on G.
+
+Every public function and shape raises ``IdentificationError`` (a ``ValueError``, see ``errors``)
+with a one-line message for an argument of the wrong type, shape or value.
 """
 
 from __future__ import annotations
@@ -23,40 +26,86 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sustain_drake.identification.errors import (
+    VECTOR3,
+    IdentificationError,
+    homogeneous_transform,
+    instance,
+    real_array,
+    real_number,
+    rotation,
+)
+
+
+def _positive(name: str, value) -> float:
+    x = real_number(name, value, what="a positive number")
+    if not x > 0.0:
+        raise IdentificationError(f"{name} must be a positive number, got {x}")
+    return x
+
 
 @dataclass(frozen=True)
 class Box:
-    """A box centred on its frame, with sizes along x, y, z in metres."""
+    """A box centred on its frame, with sizes along x, y, z in metres (positive, finite)."""
 
     size: tuple[float, float, float]
+
+    def __post_init__(self):
+        size = real_array("size", self.size, VECTOR3, what="three sizes")
+        if not np.all(size > 0.0):
+            raise IdentificationError(f"size must be three positive numbers, got {size.tolist()}")
 
 
 @dataclass(frozen=True)
 class Cylinder:
-    """A cylinder along its frame's z axis, centred on it: radius and length in metres."""
+    """A cylinder along its frame's z axis, centred on it: radius and length in metres (positive,
+    finite)."""
 
     radius: float
     length: float
 
+    def __post_init__(self):
+        _positive("radius", self.radius)
+        _positive("length", self.length)
+
 
 @dataclass(frozen=True)
 class Sphere:
-    """A sphere centred on its frame: radius in metres."""
+    """A sphere centred on its frame: radius in metres (positive, finite)."""
 
     radius: float
+
+    def __post_init__(self):
+        _positive("radius", self.radius)
 
 
 Shape = Box | Cylinder | Sphere
 
 
 def predicted_wrench(mass: float, p_KCm: np.ndarray, R_WK: np.ndarray, g_W: np.ndarray) -> np.ndarray:
-    """``[tau; f]`` the sensor applies to hold the payload still at orientation ``R_WK``."""
+    """``[tau; f]`` the sensor applies to hold the payload still at orientation ``R_WK``.
+    IdentificationError unless ``mass`` is a finite number >= 0, ``p_KCm`` and ``g_W`` finite
+    3-vectors and ``R_WK`` a rotation matrix."""
+    mass = real_number("mass", mass, what="a number >= 0")
+    if not mass >= 0.0:
+        raise IdentificationError(f"mass must be a number >= 0, got {mass}")
+    p_KCm, g_W = real_array("p_KCm", p_KCm, VECTOR3), real_array("g_W", g_W, VECTOR3)
+    R_WK = rotation("R_WK", R_WK)
     f = -mass * (R_WK.T @ g_W)
     return np.concatenate([np.cross(p_KCm, f), f])
 
 
 def line_of_action(f_c: np.ndarray, tau_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The point of the line nearest the origin and the unit direction of ``f_c``."""
+    """The point of the line nearest the origin and the unit direction of ``f_c``.
+    IdentificationError unless ``f_c`` is a finite non-zero 3-vector and ``tau_c`` a finite
+    3-vector."""
+    f_c, tau_c = real_array("f_c", f_c, VECTOR3), real_array("tau_c", tau_c, VECTOR3)
+    if not float(f_c @ f_c) > 0.0:
+        raise IdentificationError("f_c must be a non-zero force (no line of action), got zeros")
+    return _line_of_action(f_c, tau_c)
+
+
+def _line_of_action(f_c: np.ndarray, tau_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ff = float(f_c @ f_c)
     return np.cross(f_c, tau_c) / ff, f_c / math.sqrt(ff)
 
@@ -144,11 +193,18 @@ def locate_touch(residual_wrench: np.ndarray, shape: Shape, X_KG: np.ndarray) ->
 
     Returns:
         The touch point, or None when the residual force is zero (no line of action).
+
+    Raises:
+        IdentificationError: ``residual_wrench`` is not a finite 6-vector, ``shape`` not a Box,
+            Cylinder or Sphere, or ``X_KG`` not a 4 x 4 transform with a rotation block.
     """
+    residual_wrench = real_array("residual_wrench", residual_wrench, (6,))
+    instance("shape", shape, (Box, Cylinder, Sphere), "a Box, Cylinder or Sphere")
+    X_KG = homogeneous_transform("X_KG", X_KG)
     tau_c, f_c = residual_wrench[0:3], residual_wrench[3:6]
     if not float(f_c @ f_c) > 1e-24:
         return None
-    p_K, u_K = line_of_action(f_c, tau_c)
+    p_K, u_K = _line_of_action(f_c, tau_c)
     R_KG, p_KG = X_KG[:3, :3], X_KG[:3, 3]
     p, u = R_KG.T @ (p_K - p_KG), R_KG.T @ u_K  # the line in G
     if isinstance(shape, Box):
@@ -157,8 +213,8 @@ def locate_touch(residual_wrench: np.ndarray, shape: Shape, X_KG: np.ndarray) ->
         hits = _sphere_hits(p, u, shape.radius)
     elif isinstance(shape, Cylinder):
         hits = _cylinder_hits(p, u, shape.radius, shape.length)
-    else:
-        raise TypeError(f"unsupported shape {type(shape).__name__}: use Box, Cylinder or Sphere")
+    else:  # unreachable: checked above
+        raise IdentificationError(f"unsupported shape {type(shape).__name__}: use Box, Cylinder or Sphere")
     # The contact is where the environment's force (-f_c, i.e. along -u) pushes into the surface.
     pushing = [(t, n) for t, n in hits if float(n @ u) > 0.0]
     if pushing:
