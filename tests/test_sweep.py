@@ -15,7 +15,7 @@ from sustain_drake.experiments import run as run_module
 from sustain_drake.experiments.targets import TARGETS, check_targets
 from sustain_drake.station import load_scenario
 from sustain_drake.station.scenario import load_scenario_string, with_seed
-from sustain_drake.sweeps import SweepError, load_sweep, read_table, run_sweep, write_summary
+from sustain_drake.sweeps import SweepError, SweepRunError, load_sweep, read_table, run_sweep, write_summary
 from sustain_drake.sweeps.engine import flatten
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -194,7 +194,7 @@ def test_an_output_under_a_file_is_refused_before_running(tmp_path, capsys):
     path = sweep_file(tmp_path, "duration: 0.2\n")
     (tmp_path / "file").write_text("x")
     with in_process_client() as client:
-        with pytest.raises(Exception, match="not a folder|cannot write"):
+        with pytest.raises(SweepRunError, match="cannot create it, .*file is a file"):
             run_sweep(load_sweep(path), tmp_path / "file", client, progress=False)
 
 

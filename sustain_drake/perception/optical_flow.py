@@ -30,7 +30,7 @@ window along). Two cheap tests end such a track (:func:`identity_kept`):
   behind or in front of it is usually tens of cm away).
 
 The depth test is on by default, the appearance test off (``ncc_min`` = 0). Measured on 12 s of
-``diagrams/body_detection.yaml`` (seed 3, the person passing the arm; 400 corners): without
+``diagrams/body_detection.yaml`` (the person passing the arm; 400 corners): without
 either test 5 tracks went from the arm onto the person; the depth test alone ended all 5
 and shortened the tracks that stay on the arm by ~2 % (median life 65 frames against 66);
 adding NCC >= 0.8 caught nothing more there but shortened them to a median of 41-48 frames

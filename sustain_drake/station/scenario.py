@@ -285,23 +285,23 @@ def _load_text(text: str, name: str | None) -> Scenario:
     """The scenario ``name`` (None: the whole document) of the YAML ``text``, checked."""
     # These modules read this one's types, so they are imported when first needed.
     from sustain_drake.station.scenario_yaml import (
-        _check_duplicate_keys,
-        _load_problem,
-        _raw_document,
-        _shape_problem,
+        check_duplicate_keys,
+        load_problem,
+        raw_document,
+        shape_problem,
     )
 
-    _check_duplicate_keys(text)
-    raw = _raw_document(text)
+    check_duplicate_keys(text)
+    raw = raw_document(text)
     root = raw.get(name) if isinstance(raw, dict) and name is not None else raw
     if isinstance(root, dict):
-        problem = _shape_problem(root, Scenario, "")
+        problem = shape_problem(root, Scenario, "")
         if problem:
             raise ScenarioError(problem)
     try:
         scenario = yaml_load_typed(schema=Scenario, data=text, child_name=name)
     except Exception as e:  # yaml_load_typed raises RuntimeError/ValueError/TypeError/yaml errors
-        raise ScenarioError(_load_problem(text, name, e)) from None
+        raise ScenarioError(load_problem(text, name, e)) from None
     validate_scenario(scenario, experiments=True)
     return scenario
 

@@ -14,7 +14,7 @@ from pydrake.common.yaml import yaml_load, yaml_load_typed
 from sustain_drake.station.scenario import Scenario, ScenarioError, one_line
 
 
-def _check_duplicate_keys(text: str) -> None:
+def check_duplicate_keys(text: str) -> None:
     """Refuses a key given twice in one mapping (YAML keeps the last one without a word); keys
     brought in by a merge (``<<: *base``) may be overridden."""
     try:
@@ -61,7 +61,7 @@ def _construct_tagged(loader, tag, node):
 _RawLoader.add_multi_constructor("!", _construct_tagged)
 
 
-def _raw_document(text: str):
+def raw_document(text: str):
     """The YAML ``text`` as plain data (None if it does not read: yaml_load_typed then says why)."""
     try:
         return yaml.load(text, Loader=_RawLoader)
@@ -69,7 +69,7 @@ def _raw_document(text: str):
         return None
 
 
-def _shape_problem(value, schema, path: str) -> str | None:
+def shape_problem(value, schema, path: str) -> str | None:
     """A value yaml_load_typed would take in a wrong shape: a mapping or a number for a list (it reads
     a mapping's keys as the items), a number for a vector (it makes an uninitialized array of that
     size). None: no such value."""
@@ -80,13 +80,13 @@ def _shape_problem(value, schema, path: str) -> str | None:
             return f"{path} needs a list of numbers, got {shown(value)}"
         if isinstance(value, dict) and "_tag" in value:
             match = [a for a in options if _tag_name(a) == str(value["_tag"]).lstrip("!")]
-            return _shape_problem(value, match[0], path) if match else None
-        return _shape_problem(value, options[0], path) if len(options) == 1 and value is not None else None
+            return shape_problem(value, match[0], path) if match else None
+        return shape_problem(value, options[0], path) if len(options) == 1 and value is not None else None
     if origin is list:
         if not isinstance(value, list):
             return f"{path} must be a list [...], got {shown(value)}"
         for i, item in enumerate(value):
-            found = _shape_problem(item, args[0], f"{path}[{i}]")
+            found = shape_problem(item, args[0], f"{path}[{i}]")
             if found:
                 return found
         return None
@@ -94,7 +94,7 @@ def _shape_problem(value, schema, path: str) -> str | None:
     if fields is not None and isinstance(value, dict):
         for key, sub in value.items():
             if key in fields:
-                found = _shape_problem(sub, fields[key], f"{path}.{key}" if path else str(key))
+                found = shape_problem(sub, fields[key], f"{path}.{key}" if path else str(key))
                 if found:
                     return found
     return None
@@ -112,7 +112,7 @@ def _represent_tagged(dumper, data):
 _TaggedDumper.add_representer(dict, _represent_tagged)
 
 
-def _load_problem(text: str, name: str | None, error: Exception) -> str:
+def load_problem(text: str, name: str | None, error: Exception) -> str:
     """yaml_load_typed's ``error`` as one line naming the key (found by loading the document's
     values one at a time); Drake's own message when no single value is to blame."""
     try:

@@ -34,7 +34,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from sustain_drake.experiments.targets import check_targets
-from sustain_drake.files import write_atomically
+from sustain_drake.files import OutputPathError, prepare_folder, write_atomically
 from sustain_drake.provenance import source_commit
 from sustain_drake.station.scenario import one_line
 from sustain_drake.sweeps.spec import Cell, Sweep
@@ -116,12 +116,10 @@ def run_sweep(sweep: Sweep, out: str | Path, client, *, retry_failed: bool = Fal
     from distributed import as_completed
 
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise SweepRunError(f"{out} exists and is not a folder")
     try:
-        (out / CELLS).mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise SweepRunError(f"cannot write the output folder {out}: {e.strerror}") from None
+        prepare_folder(out / CELLS, "the sweep's output folder")
+    except OutputPathError as e:
+        raise SweepRunError(str(e)) from None
     table = read_table(out)
     done = set() if table.empty else set(
         table.loc[table["error"].isna() | (not retry_failed), "cell_id"])

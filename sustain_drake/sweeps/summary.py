@@ -83,15 +83,19 @@ def _groups(table: pd.DataFrame, column: str) -> list[tuple[str, pd.DataFrame]]:
     return [(value, table[values == value]) for value in dict.fromkeys(values)]
 
 
+def _target(name: str):
+    experiment, target = name.split(".", 1)
+    return next(t for t in TARGETS[experiment] if t.name == target)
+
+
 def _decider(name: str):
-    experiment, target = name.split(".", 1)
-    op = next(t.op for t in TARGETS[experiment] if t.name == target)
-    return {"<=": np.max, ">=": np.min}.get(op, lambda v: v.iloc[int(np.argmax(np.abs(v)))])
-
-
-def _bound(name: str) -> float:
-    experiment, target = name.split(".", 1)
-    return next(t.bound for t in TARGETS[experiment] if t.name == target)
+    """How a column of deciding values is summed up as its worst (``Target.worst`` across cells)."""
+    target = _target(name)
+    if target.op == "<=":
+        return np.max
+    if target.op == ">=":
+        return np.min
+    return lambda v: v.iloc[int(np.argmax(np.abs(v - target.bound)))]
 
 
 def _cell_text(value) -> str:
@@ -118,7 +122,7 @@ def plot_axis(table: pd.DataFrame, axis: str) -> bytes | None:
             jitter = np.linspace(-0.15, 0.15, len(values)) if len(values) > 1 else np.zeros(1)
             ax.scatter(i + jitter[:len(values)], values, s=14,
                        c=np.where(met.to_numpy(), "tab:green", "tab:red"))
-        ax.axhline(_bound(name), color="k", linestyle="--", linewidth=0.8)
+        ax.axhline(_target(name).bound, color="k", linestyle="--", linewidth=0.8)
         ax.set_title(name, fontsize=9)
         ax.set_xticks(range(len(groups)))
         ax.set_xticklabels([_short(v) for v, _ in groups], rotation=30, ha="right", fontsize=7)

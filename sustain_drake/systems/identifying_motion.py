@@ -28,13 +28,14 @@ class IdentifyingMotion(LeafSystem):
     first convergence), the arm has stayed within 0.2 rad (max-norm) of one posture for ``max_hold``
     s (default: three intervals), it asks for one however often the detector asks, and holds the
     detector's requests back until the arm is there (0.05 rad, or ``max_hold`` s): the detector's
-    confirming trials can follow each other for tens of seconds (after the slip of
-    ``hand_eye.yaml`` with seed 1: 55 s within 0.1 rad of one posture), and then nothing converges.
+    confirming trials can follow each other for tens of seconds (after a slip, the arm can stay
+    within 0.1 rad of one posture for most of a minute), and then nothing converges.
     Before the first convergence only while the identifiers ask for more motion (``more_motion``:
     a point has been tracked for a while, or points converged that do not pin the camera's
     rotation yet): until then the body features
-    the candidates come from are what those trials find (forcing far postures from the start found
-    seed 1's first tool point at 29.5 s, not 6 s, and delayed seed 2's first convergence to 40 s).
+    the candidates come from are what those trials find (forcing far postures from the start
+    delays the first tool point and the first convergence by tens of seconds;
+    docs/hand_eye_record.md has the runs).
     With ``more_motion_reach`` (rad), postures asked for while ``more_motion`` is set are drawn
     within that reach (max-norm) of the posture the arm had when it was set (the anchor: there the
     points were seen; a walk from posture to posture drifts until their faces turn away), the

@@ -198,10 +198,10 @@ def near_known_points(bank: CandidateBank, params: CandidateParams, X_WH: np.nda
     window plus ``turn_radius`` of where that camera, posed as ``_turn_window`` says, sees a known
     point of the hand at ``X_WH`` (all False before a turn). The detector's body cells are fixed in
     the image, so after a camera move they hold the static scene and its trials must find the
-    body's features again (seed 5: 10.7 s without a candidate while tracks lay 5-6 mm from where
-    the known marks were predicted); the model says where they are. A point of the static scene
-    admitted so is left out by the camera's fit: with the hand turning, its samples fit no point
-    of H."""
+    body's features again, which can take seconds while the tracks already lie a few mm from where
+    the known marks are predicted (docs/hand_eye_record.md); the model says where they are. A
+    point of the static scene admitted so is left out by the camera's fit: with the hand turning,
+    its samples fit no point of H."""
     near = np.zeros(len(usable), bool)
     if bank.turned_R_WC is None or not bank.known_points or not np.any(usable):
         return near

@@ -36,8 +36,9 @@ def choose(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCr
     ``adopted_mse`` (unchanged when none leads)."""
     held_back, best = False, None
     # min_rotation_lever: the leader held back on an earlier frame waits for views only while its
-    # point is seen; once it is not (its face turned away, its track ended: seed 2's converged
-    # points all went within 1 s), the views it waited for are over and it is adopted as it is.
+    # point is seen; once it is not (its face turned away, its track ended: a tool's converged
+    # points can all leave view within a second), the views it waited for are over and it is
+    # adopted as it is.
     held = (next((c for c in pool.kept + pool.archive if c.feature_id == bank.held_back), None)
             if pool.leader < 0 and bank.held_back >= 0 else None)  # fmt: skip
     unseen = held is not None and (seen.row.get(held.feature_id) is None
