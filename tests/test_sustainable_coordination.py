@@ -18,7 +18,7 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
 
 from sustain_drake.identification import coordination
-from sustain_drake.loops.coordination import make_sustainable_coordination
+from sustain_drake.loops.coordination import RANGE_MARGIN, joint_ranges_from_limits, make_sustainable_coordination
 from sustain_drake.loops.hand_eye import HandEyeConfig
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
 
@@ -163,7 +163,7 @@ def test_touch_on_the_held_object_after_the_payload_is_adopted():
 
 def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
     info = CameraInfo(160, 120, 1.0)
-    diagram = make_sustainable_coordination(info, 6)
+    diagram = make_sustainable_coordination(info, 6, joint_ranges=[[-1.0, 1.0]] * 6)
     names = {diagram.get_input_port(i).get_name() for i in range(diagram.num_input_ports())}
     assert names == {"color_image", "depth_image", "image_time", "joint_positions", "joint_velocities",
                      "X_WH", "wrench"}  # fmt: skip
@@ -179,8 +179,9 @@ def test_without_a_plant_the_hand_pose_is_an_input_and_sizes_are_checked():
         make_sustainable_coordination(info, 6, plant=three_joint_arm(),
                                       hand_frame=three_joint_arm().world_frame())  # fmt: skip
     babbling = HandEyeConfig(identifying_motion_interval=2.0)  # far postures: within which ranges?
-    with pytest.raises(ValueError, match="identifying_motion_interval needs the babbling's joint_ranges"):
+    with pytest.raises(ValueError, match="the identifying motion needs joint_ranges .* or a plant"):
         make_sustainable_coordination(info, 6, hand_eye=babbling)
+    assert make_sustainable_coordination(info, 6, hand_eye=replace(babbling, identifying_motion_interval=0.0))
     with pytest.raises(ValueError, match="joint_ranges has 5 rows for num_joints = 6"):
         make_sustainable_coordination(info, 6, hand_eye=babbling, joint_ranges=[[-1.0, 1.0]] * 5)
     for reach in (-0.3, float("nan")):
@@ -222,9 +223,11 @@ def test_the_camera_motion_detector_is_optional_and_exported():
     """``hand_eye.camera_motion.enabled`` adds the camera-motion detector (fed by the same joint
     positions as the coincidence detector) and its ``camera_motion`` output; off, neither."""
     info = CameraInfo(160, 120, 1.0)
-    assert not make_sustainable_coordination(info, 6).HasOutputPort("camera_motion")
-    config = HandEyeConfig()
-    config.camera_motion.enabled = True
+    off = HandEyeConfig(identifying_motion_interval=0.0)
+    off.camera_motion.enabled = False
+    assert not make_sustainable_coordination(info, 6, hand_eye=off).HasOutputPort("camera_motion")
+    config = HandEyeConfig(identifying_motion_interval=0.0)
+    assert config.camera_motion.enabled  # the measured configuration's default
     diagram = make_sustainable_coordination(info, 6, hand_eye=config)
     context = diagram.CreateDefaultContext()
     diagram.GetInputPort("color_image").FixValue(context, ImageRgba8U(160, 120))
@@ -238,3 +241,19 @@ def test_the_camera_motion_detector_is_optional_and_exported():
     assert list(diagram.GetOutputPort("camera_motion").Eval(context)) == [0.0, 0.0]
     camera = diagram.GetSubsystemByName("camera_motion_detector")
     assert camera.GetInputPort("actuator_positions").size() == 6
+
+
+def test_the_identifying_motion_takes_its_ranges_from_the_plant_limits():
+    """With a plant and no ``joint_ranges``, the identifying motion (on by default) asks for
+    postures within the plant's position limits narrowed by RANGE_MARGIN at each end."""
+    plant = three_joint_arm()
+    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    ranges = joint_ranges_from_limits(plant)
+    lo = np.where(np.isfinite(lower), lower, -np.pi)
+    hi = np.where(np.isfinite(upper), upper, np.pi)
+    np.testing.assert_allclose(ranges[:, 0], lo + RANGE_MARGIN * (hi - lo))
+    np.testing.assert_allclose(ranges[:, 1], hi - RANGE_MARGIN * (hi - lo))
+    assert np.all(ranges[:, 0] < ranges[:, 1])
+    diagram = make_sustainable_coordination(CameraInfo(160, 120, 1.0), 3, plant=plant,
+                                            hand_frame=plant.GetBodyByName("link3").body_frame())
+    assert diagram.GetSubsystemByName("identifying_motion") is not None

@@ -31,7 +31,7 @@ class BodyDetectionConfig:
     max_corners: int = _TRACKER.max_corners  # count: Shi-Tomasi features tracked at most
     min_distance_px: float = _TRACKER.min_distance_px  # px: least spacing of Shi-Tomasi features
     # start Lucas-Kanade at the previous frame's flow, so a periodic texture cannot make it jump a period
-    predict_flow: bool = _TRACKER.predict_flow
+    predict_flow: bool = True
     # fraction of the best corner's quality a Shi-Tomasi corner needs
     quality_level: float = _TRACKER.quality_level
     tau_a: float = _RULE.tau_a  # s: window of the actuator onset detector rho_a (Eq. (27))

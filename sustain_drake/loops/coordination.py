@@ -82,7 +82,8 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     joint positions (``HandPoseFromPlant``); else it is the ``X_WH`` input and the sensor frame K is
     the hand frame H. ``held_shape`` (the held object's ``pydrake.geometry`` shape at ``X_KG`` in K)
     adds the touch estimator. ``joint_ranges`` (n x [lower, upper], rad) are the postures the
-    identifying motion may ask for (needed with ``hand_eye.identifying_motion_interval`` > 0; its
+    identifying motion may ask for (needed with ``hand_eye.identifying_motion_interval`` > 0, the
+    default; with a plant and no ranges, its position limits narrowed by ``RANGE_MARGIN``; its
     draws come from ``motion_seed``).
 
     .. pydrake_system::
@@ -142,6 +143,13 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     if plant is None and not (hand_frame is None and sensor_frame is None and model_instance is None):
         raise ValueError("make_sustainable_coordination: hand_frame, sensor_frame and model_instance "
                          "need a plant")  # fmt: skip
+    if plant is not None:
+        positions = plant.num_positions() if model_instance is None else plant.num_positions(model_instance)
+        if positions != num_joints:
+            raise ValueError(f"make_sustainable_coordination: the plant has {positions} positions for "
+                             f"num_joints = {num_joints}")  # fmt: skip
+        if joint_ranges is None:
+            joint_ranges = joint_ranges_from_limits(plant, model_instance)
     builder = DiagramBuilder()
     try:
         vision = add_hand_eye_loop(builder, camera_info, num_joints, fps, hand_eye, body_detection,
@@ -163,9 +171,6 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     if plant is not None:
         fk = builder.AddSystem(HandPoseFromPlant(plant, hand_frame, sensor_frame, model_instance))
         fk.set_name("hand_pose_from_plant")
-        if fk.get_input_port().size() != num_joints:
-            raise ValueError(f"make_sustainable_coordination: the plant has {fk.get_input_port().size()} "
-                             f"positions for num_joints = {num_joints}")  # fmt: skip
         builder.ConnectInput(joint_positions, fk.get_input_port())
         X_WH, X_WK = fk.GetOutputPort("X_WH"), fk.GetOutputPort("X_WK")
     else:
@@ -204,6 +209,25 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     diagram = builder.Build()
     diagram.set_name("sustainable_coordination")
     return diagram
+
+
+# Fraction of a joint's limit range kept clear at each end when the ranges come from the limits:
+# the identifying motion's postures stay off the limits' stops.
+RANGE_MARGIN = 0.1
+
+
+def joint_ranges_from_limits(plant, model_instance=None) -> np.ndarray:
+    """``[lower, upper]`` (rad) per position of ``plant`` (of ``model_instance`` if given): its
+    position limits narrowed by ``RANGE_MARGIN`` of their span at each end; a joint without finite
+    limits turns within +-pi."""
+    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    if model_instance is not None:
+        lower = plant.GetPositionsFromArray(model_instance, lower)
+        upper = plant.GetPositionsFromArray(model_instance, upper)
+    lower = np.where(np.isfinite(lower), lower, -np.pi)
+    upper = np.where(np.isfinite(upper), upper, np.pi)
+    margin = RANGE_MARGIN * (upper - lower)
+    return np.column_stack([lower + margin, upper - margin])
 
 
 class _PosePassThrough(LeafSystem):

@@ -5,6 +5,7 @@ motion beyond the paper."""
 
 # No "from __future__ import annotations": yaml_load_typed needs the real field types.
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,39 +24,113 @@ from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation
 
 
+# rad per pixel of the camera the image thresholds were measured with (640 x 480, 45 deg vertical
+# field of view: f = 579.4 px). A threshold is an angle; at another camera it is that angle times
+# the camera's focal length in px, so it means the same view of the scene at any resolution.
+RAD_PER_PX_MEASURED = math.tan(math.radians(22.5)) / 240.0
+
+
 @dataclasses.dataclass
-class CameraMotionConfig(CameraMotionParams):
-    """The camera notices its own motion from the static scene (beyond the paper): the detector's
-    thresholds (``perception.camera_motion.CameraMotionParams``) and whether it runs."""
+class CameraMotionConfig:
+    """The camera notices its own motion from the static scene (beyond the paper,
+    ``perception.camera_motion``). Image thresholds are angles (rad), turned into pixels with the
+    camera's focal length; the detector's other constants are ``CameraMotionParams``' defaults."""
 
-    enabled: bool = False  # add a CameraMotionDetector whose camera moves are change detections
+    enabled: bool = True  # add a CameraMotionDetector whose camera moves are change detections
+    min_background: int = 20  # count: still scene features (anchors) needed to judge a frame
+    anchor_time: float = 0.5  # s a feature stays still before it is an anchor
+    # rad of composed image motion that make an episode a camera move: a turn by a moves points at
+    # depth z by z a, and sqrt(allowable error) ~ 13 mm at the tool's <= 0.9 m is 14 mrad, so
+    # 10.4 mrad (6 px at the measured camera) counts every move the observation rule could see
+    move_angle: float = 6.0 * RAD_PER_PX_MEASURED
+    # rad: a feature within this of the scene's fitted motion is a RANSAC inlier (2 px measured)
+    inlier_angle: float = 2.0 * RAD_PER_PX_MEASURED
+    # rad per frame at or below which the scene is not moving (1 px measured)
+    still_angle: float = 1.0 * RAD_PER_PX_MEASURED
+    # rad a still feature may wander and stay an anchor (1 px measured)
+    feature_still_angle: float = 1.0 * RAD_PER_PX_MEASURED
+    # rad per frame: a frame moving at most this adds to the still scene's view (0.2 px measured)
+    view_still_angle: float = 0.2 * RAD_PER_PX_MEASURED
+    exclude_static: bool = True  # features still through 0.5 s of arm motion are no hand candidates
 
-    def params(self) -> CameraMotionParams:
-        """The detector's thresholds alone (raises ``ValueError`` with one line on bad values)."""
-        return CameraMotionParams(**{f.name: getattr(self, f.name)
-                                     for f in dataclasses.fields(CameraMotionParams)})
+    def params(self, focal_px: float) -> CameraMotionParams:
+        """The detector's thresholds in px for a camera of focal length ``focal_px`` (raises
+        ``ValueError`` with one line on bad values)."""
+        return CameraMotionParams(
+            min_background=self.min_background, anchor_time=self.anchor_time,
+            move_px=self.move_angle * focal_px, inlier_px=self.inlier_angle * focal_px,
+            still_px=self.still_angle * focal_px, feature_still_px=self.feature_still_angle * focal_px,
+            view_still_px=self.view_still_angle * focal_px, exclude_static=self.exclude_static)
+
+
+def measured_coordination() -> CoordinationConfig:
+    """The hand-eye identify/observe settings the results were measured with (docs/results.md)."""
+    return CoordinationConfig(
+        max_expected_rms=0.005,  # m, criterion (a): the physical form of lambda_16 < 5e-5
+        min_gap_ratio=30.0,  # criterion (b): lambda_15 / lambda_16
+        max_ssd=0.1,  # criterion (c), the paper's
+        # 8.3 s at 30 Hz: the babbling covers more of its range before a camera is adopted, so the
+        # rotation about the workspace is pinned by views from several sides
+        min_samples=250,
+        allowable_error_factor=100.0,  # sigma = 100 max(a^2 lambda_16, noise_rms^2), the paper's
+        # m: the depth noise sigma(z) = 1.2 mm + 1.9 mm/m^2 (z - 0.4 m)^2 at the tool's 0.6 m
+        # (Nguyen et al. 2012; station DepthNoiseConfig), rounded up
+        noise_rms=0.0013,
+        max_consecutive_violations=10,  # the paper's
+        pause_after_convergence=3.0,  # s, the paper's
+    )  # fmt: skip
+
+
+def measured_candidates() -> CandidateParams:
+    """The candidate identifiers' settings the results were measured with; the rules beyond the
+    paper that they turn on are described at ``CandidateParams``' fields and in docs/hand_eye.md."""
+    return CandidateParams(
+        max_candidates=8, motion_min_samples=30, max_unconverged_time=30.0,
+        joint=True, joint_consistency=2.0, joint_weighted=True, max_observers=4,
+        observe_min_samples=100, observe_radius=0.1,
+        reacquire_radius=0.004,  # m, three times the depth noise
+        min_rotation_spread=0.05, keep_allowable_error=True,
+        free_space_radius=0.005,  # m around the adopted tool point: the smallest depth seen behind it
+        keep_tool_points=True, turn_admit_known=True,
+        # after a slip with the scene still, only p_HP is new (3 unknowns): 1.7 s at 30 Hz
+        keep_camera_min_samples=50,
+    )  # fmt: skip
+
+
+def measured_refinement() -> RefinementParams:
+    """The FeatureRefiner's settings the results were measured with: cornerSubPix with a 9 x 9
+    window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it), only centrally symmetric
+    points, the depth on the face's fitted plane (docs/hand_eye.md, "Points")."""
+    return RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3, depth_plane=True)
 
 
 @dataclasses.dataclass
 class HandEyeConfig:
     """Sustainable marker-free hand-eye coordination: identifiers per candidate body feature and
-    the identify <-> observe state machine (paper §3.4, §4.3)."""
+    the identify <-> observe state machine (paper §3.4, §4.3). The defaults are the configuration
+    the results were measured with (docs/results.md)."""
 
     enabled: bool = False  # run the hand-eye experiment on the scenario's world
-    coordination: CoordinationConfig = field(default_factory=CoordinationConfig)  # convergence, observation
-    candidates: CandidateParams = field(default_factory=CandidateParams)  # candidate tracked points (Fig. 7)
+    # convergence and observation (measured_coordination)
+    coordination: CoordinationConfig = field(default_factory=measured_coordination)
+    # candidate tracked points (Fig. 7; measured_candidates)
+    candidates: CandidateParams = field(default_factory=measured_candidates)
     camera_motion: CameraMotionConfig = field(default_factory=CameraMotionConfig)  # the camera's own motion
     # s; > 0: while identifying, a far posture is asked of the babbling when no confirming request
-    # came for this long (systems.identifying_motion); 0: off.
-    identifying_motion_interval: float = 0.0
+    # came for this long (systems.identifying_motion; needs the joint ranges); 0: off. The detector's
+    # confirming trials otherwise hold the arm near one posture, and the camera's rotation is only
+    # seen through the hand's turning.
+    identifying_motion_interval: float = 1.0
     # s (>= the interval): after a first convergence, a far posture also comes when the arm has
     # stayed within 0.2 rad of one posture this long, however often the detector asks.
     identifying_motion_max_hold: float = 3.0
     # rad; > 0: while the candidates ask for more motion, the postures asked for lie within this
-    # (max-norm) of the arm's posture when the ask began; 0: far postures over the whole ranges.
-    identifying_motion_reach: float = 0.0
+    # (max-norm) of the arm's posture when the ask began (the hand turns while the points' faces stay
+    # in view); 0: far postures over the whole ranges.
+    identifying_motion_reach: float = 0.1
     refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
-    refinement: RefinementParams = field(default_factory=RefinementParams)  # the FeatureRefiner's thresholds
+    # the FeatureRefiner's thresholds (measured_refinement)
+    refinement: RefinementParams = field(default_factory=measured_refinement)
     false_alarm_window: float = 2.0  # s; a detection with no disturbance this long before is a false alarm
     log_rate: float = 30.0  # samples per second of the logged signals (plots, metrics)
 
@@ -107,8 +182,9 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     ``HandEyeLoop.motion_confirm()`` and ``state_machine.pause``. Raises ValueError on bad settings."""
     if hand_eye.identifying_motion_interval > 0:
         if joint_ranges is None:
-            raise ValueError("hand_eye.identifying_motion_interval needs the babbling's joint_ranges "
-                             "(the postures it may ask for)")  # fmt: skip
+            raise ValueError("the identifying motion needs joint_ranges (n x [lower, upper] rad, the "
+                             "postures it may ask for) or a plant to take them from; or set "
+                             "hand_eye.identifying_motion_interval = 0")  # fmt: skip
         if len(joint_ranges) != num_joints:
             raise ValueError(f"joint_ranges has {len(joint_ranges)} rows for num_joints = {num_joints}")
         if not (hand_eye.identifying_motion_reach >= 0 and np.isfinite(hand_eye.identifying_motion_reach)):
@@ -141,7 +217,7 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     else:  # the camera notices its own motion from the static scene
         camera = builder.AddSystem(CameraMotionDetector(
             num_joints, tracker.grid.num_cells, (info.width(), info.height()),
-            hand_eye.camera_motion.params(), period=period, offset=0.75 * period,
+            hand_eye.camera_motion.params(info.focal_x()), period=period, offset=0.75 * period,
             camera_info=info))  # fmt: skip
         camera.set_name("camera_motion_detector")
         builder.Connect(tracker.GetOutputPort("tracked_features"), camera.GetInputPort("tracked_features"))

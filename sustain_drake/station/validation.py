@@ -15,7 +15,7 @@ from pydrake.systems.sensors import CameraConfig
 
 from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.loops.body_detection import BodyDetectionConfig
-from sustain_drake.loops.hand_eye import HandEyeConfig
+from sustain_drake.loops.hand_eye import CameraMotionConfig, HandEyeConfig
 from sustain_drake.loops.identify_observe import CoordinationConfig
 from sustain_drake.loops.payload import KinestheticConfig, QuasiStaticConfig
 from sustain_drake.perception.camera_motion import CameraMotionParams
@@ -192,6 +192,12 @@ RANGES: dict[type, dict[str, Range]] = {
         "arm_speed": _from(0, 100, "rad/s"), "rest_frames": _from(1, 1000),
         "min_frames": _from(1, 1000), "move_px": _above(0, 4096, "px"),
         "view_still_px": _from(0, 100, "px"), "turn_frames": _from(0, 1000),
+    },
+    CameraMotionConfig: {
+        "min_background": _from(3, 10_000), "anchor_time": _from(0, 60, "s"),
+        "move_angle": _above(0, 1, "rad"), "inlier_angle": _above(0, 0.2, "rad"),
+        "still_angle": _from(0, 0.2, "rad"), "feature_still_angle": _from(0, 0.2, "rad"),
+        "view_still_angle": _from(0, 0.2, "rad"),
     },
     HandEyeConfig: {
         "identifying_motion_interval": WAIT, "identifying_motion_max_hold": WAIT,
@@ -398,8 +404,9 @@ def _check_math_layer(s: Scenario) -> None:
     a loaded file set their fields one by one, so construct them (whether or not the experiment is on)."""
     he, k, bd = s.hand_eye, s.kinesthetic, s.body_detection
     cm = he.camera_motion
-    _check(cm.move_px > cm.still_px >= cm.view_still_px, "hand_eye.camera_motion needs move_px > still_px "
-           f">= view_still_px, got {shown(cm.move_px)}, {shown(cm.still_px)}, {shown(cm.view_still_px)}")
+    _check(cm.move_angle > cm.still_angle >= cm.view_still_angle, "hand_eye.camera_motion needs "
+           f"move_angle > still_angle >= view_still_angle, got {shown(cm.move_angle)}, "
+           f"{shown(cm.still_angle)}, {shown(cm.view_still_angle)}")
     _check(bd.response_window is None or bd.response_window <= bd.tau_a,
            f"body_detection.response_window must be at most tau_a ({shown(bd.tau_a)} s) or null, got "
            f"{shown(bd.response_window)}")
@@ -413,7 +420,8 @@ def _check_math_layer(s: Scenario) -> None:
               ("hand_eye.coordination", he.coordination.rule),
               ("hand_eye.candidates", lambda: dataclasses.replace(he.candidates)),
               ("hand_eye.refinement", lambda: dataclasses.replace(he.refinement)),
-              ("hand_eye.camera_motion", he.camera_motion.params),
+              # the thresholds' combinations do not depend on the focal length
+              ("hand_eye.camera_motion", lambda: he.camera_motion.params(1.0)),
               ("kinesthetic.coordination", lambda: k.coordination.criteria(has_rotation=False)),
               ("kinesthetic.coordination", k.coordination.rule))
     for name, make in checks:
