@@ -92,16 +92,17 @@ def target_lines(table: pd.DataFrame, experiment: str) -> list[str]:
 
 
 def bench_main(argv, doc: str, sweep: str, experiment: str, columns: list[str], row_text,
-               extra=lambda table: []) -> int:
+               extra=lambda table: [], block: str | None = None) -> int:
     """A bench's whole run: its options, its sweep's cells, then a table (``columns``, one
     ``row_text(row)`` per cell), the targets of ``experiment`` and ``extra(table)`` lines, printed
-    and, with ``--results``, published as the block ``bench_<experiment>``."""
-    args = sweep_arguments(doc.splitlines()[0], sweep, f"bench_{experiment}").parse_args(argv)
+    and, with ``--results``, published as the block ``block`` (default ``bench_<experiment>``)."""
+    block = block or f"bench_{experiment}"
+    args = sweep_arguments(doc.splitlines()[0], sweep, block).parse_args(argv)
     table = run_bench(args)
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += [row_text(row) for _, row in table.iterrows()]
     lines += target_lines(table, experiment) + extra(table)
     print("\n".join(lines))
     if args.results:
-        publish(f"bench_{experiment}", lines)
+        publish(block, lines)
     return 0

@@ -1,0 +1,81 @@
+"""Hand-eye on scenes it was not tuned on (issue 27): the cells of the scene matrix
+(``diagrams/sweeps/scene_matrix_{tuning,held_out}.yaml``, written by ``make_scene_matrix.py``) run by
+``sustain_drake.sweeps`` on Dask and checked against ``experiments.targets``.
+
+    .venv/bin/python bench/bench_scene_matrix.py --split tuning [--cells 0 1] [--workers 2] [--results]
+    .venv/bin/python bench/bench_scene_matrix.py --split held_out [--results]
+
+Every cell is a whole run (110 s) of diagrams/hand_eye.yaml with the code's default hand-eye
+settings in another scene: camera placement, resolution, tool, lighting, the person's path, the
+slips and the camera move, the motion seed. Prints one row per cell (its scene by name, the first
+convergence, the adoptions, the changes, false alarms, wrong adoptions, the worst tool point in use
+and whether every target is met) and, per target, on how many cells it is met. Never tune on the
+held-out set: run it to report, after the tuning set's changes are final.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_hand_eye import _fmt  # noqa: E402
+from common import bench_main, failed, metrics_of  # noqa: E402
+from make_scene_matrix import design  # noqa: E402
+
+SPLITS = ("tuning", "held_out")
+
+
+def _met_all(row) -> bool:
+    columns = [k for k in row.index if k.startswith("target.hand_eye.") and k.endswith(".met")]
+    return bool(columns) and all(row[k] is True or row[k] == 1 for k in columns)
+
+
+def row_maker(split: str):
+    cells = design()[split]
+
+    def row_text(row) -> str:
+        c = cells[int(row["cell"])]
+        scene = (f"{c['placement']}, {c['camera']}, {c['tool']}, {c['lights']}, person {c['person']}, "
+                 f"{c['disturbances']}, seed {c['seed']}")
+        if failed(row):
+            return f"| {row['cell']} | {scene} | failed: {row['error']} | | | | | | no |"
+        m = metrics_of(row, "hand_eye")
+        adoptions = "; ".join(
+            f"{a['time_s']:.1f} s: {a['camera_position_error_mm']:.1f} / "
+            f"{a['camera_rotation_error_deg']:.2f}, {a['tool_point_error_mm']:.1f}" for a in m["adopted"])
+        changes = "; ".join(
+            f"{d['kind'].replace('tool_', '').replace('head_', '')} {d['time_s']:.0f} s: "
+            f"{_fmt(d['detection_latency_s'])} s, {_fmt(d['reconvergence_after_detection_s'], '.1f')} s"
+            for d in m["disturbances"])
+        in_use = (m.get("tool_point_in_use_worst") or {}).get("error_mm")
+        return (f"| {row['cell']} | {scene} | {_fmt(m['first_convergence_after_found_s'], '.1f')} s "
+                f"| {adoptions or 'none'} | {changes} | {m['num_false_alarms']} "
+                f"| {m.get('num_wrong_adoptions', '-')} | {_fmt(in_use, '.1f')} "
+                f"| {'yes' if _met_all(row) else 'no'} |")
+
+    return row_text
+
+
+COLUMNS = ["cell", "scene: placement, camera, tool, lights, person, disturbances, seed",
+           "first convergence after found", "adoptions: time, camera mm / deg, tool point mm",
+           "changes: detected after, re-converged after", "false alarms", "wrong adoptions",
+           "tool point in use worst mm", "every target"]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("--split", choices=SPLITS, required=True)
+    args, rest = parser.parse_known_args(argv)
+
+    def every_target(table) -> list[str]:
+        met = sum(_met_all(r) for _, r in table.iterrows())
+        return [f"- every hand-eye target: met on {met} of {len(table)} cells ({args.split} set)"]
+
+    return bench_main(rest, __doc__, f"scene_matrix_{args.split}.yaml", "hand_eye", COLUMNS,
+                      row_maker(args.split), extra=every_target, block=f"bench_scene_matrix_{args.split}")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
