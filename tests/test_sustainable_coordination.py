@@ -18,7 +18,11 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
 
 from sustain_drake.identification import coordination
-from sustain_drake.loops.coordination import RANGE_MARGIN, joint_ranges_from_limits, make_sustainable_coordination
+from sustain_drake.loops.coordination import (
+    RANGE_MARGIN,
+    joint_ranges_from_limits,
+    make_sustainable_coordination,
+)
 from sustain_drake.loops.hand_eye import HandEyeConfig
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
 

@@ -174,10 +174,9 @@ def body_labels(station, scenario) -> tuple[tuple[int, ...], tuple[int, ...]]:
             return []
         return [int(b) for b in plant.GetBodyIndices(plant.GetModelInstanceByName(name))]
 
-    tool_instances = [name for name in ("rod_tool", "box_tool") if plant.HasModelInstanceNamed(name)]
     robot = [b for b in instance_bodies("arm") if b not in static]
-    for name in tool_instances:
-        robot += instance_bodies(name)
+    if plant.HasBodyNamed("tool"):  # any tool.model: its instance (the tool and its grip links)
+        robot += instance_bodies(plant.GetModelInstanceName(plant.GetBodyByName("tool").model_instance()))
     person = instance_bodies("person")
     return tuple(robot), tuple(person)
 

@@ -9,9 +9,11 @@ The loop, from images only (no ground truth inside it)::
             -> state machine camera_motion (a camera move is a change detection), and its
             feature_on_body (the static scene's features cleared) -> CandidateIdentifiers
 
-``finish`` evaluates against the station's ground truth (``true_X_WC``, ``true_p_HP``, logged
-beside the loop): the time of each convergence and each detection, the error of each adopted
-estimate, the latencies after each disturbance, false alarms; it draws Fig. 9-like plots.
+``finish`` evaluates against the station's ground truth (``true_X_WC``, ``true_p_HP``,
+``true_X_HT``, logged beside the loop): the time of each convergence and each detection, the error
+of each adopted estimate, the latencies after each disturbance, false alarms, the camera and the
+tool point in use over time and the wrong adoptions (``hand_eye_metrics``); it draws Fig. 9-like
+plots.
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
+from sustain_drake.experiments import hand_eye_metrics as m
+from sustain_drake.experiments.targets import target_bound
 from sustain_drake.files import write_atomically
 from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import best_p_HP_given_camera
@@ -47,7 +51,7 @@ from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 _LOGGED = (("candidates", "eigenvalues"), ("candidates", "ssd"), ("candidates", "observation"),
            ("candidates", "expected_mse"), ("state_machine", "mode"), ("state_machine", "allowable_error"),
            ("state_machine", "adopted_x"), ("station", "true_p_HP"))
-_POSES = ("true_X_WC", "X_WH")
+_POSES = ("true_X_WC", "X_WH", "true_X_HT")
 
 
 @dataclass
@@ -59,6 +63,7 @@ class HandEyeHandle:
     state_machine: CoordinationStateMachine
     loggers: dict
     camera_motion: CameraMotionDetector | None = None
+    tool_boxes: tuple = ()  # the held tool's geometry in its frame T (``hand_eye_metrics.Box``)
 
 
 def build_loop(builder, station, scenario):
@@ -109,7 +114,26 @@ def add_to_diagram(builder, station, scenario, meshcat) -> HandEyeHandle:
         builder.Connect(machine.GetOutputPort("mode"), viz.GetInputPort("mode"))
         for name in ("X_WH", "true_X_WC", "true_p_HP"):
             builder.Connect(station.GetOutputPort(name), viz.GetInputPort(name))
-    return HandEyeHandle(scenario, tracker, detector, candidates, machine, loggers, loop.camera_motion)
+    return HandEyeHandle(scenario, tracker, detector, candidates, machine, loggers, loop.camera_motion,
+                         tool_boxes(station))
+
+
+def tool_boxes(station) -> tuple:
+    """The held tool's geometry (every geometry of the plant's body ``tool``, whatever its role) as
+    oriented bounding boxes in the tool's body frame T (``hand_eye_metrics.Box``); none without a
+    tool. Evaluation only: which body an adopted point is on."""
+    plant = station.GetSubsystemByName("plant")
+    if not plant.HasBodyNamed("tool"):
+        return ()
+    inspector = station.GetSubsystemByName("scene_graph").model_inspector()
+    frame = plant.GetBodyFrameIdOrThrow(plant.GetBodyByName("tool").index())
+    boxes = []
+    for geometry in inspector.GetGeometries(frame):
+        obb = inspector.GetObbInGeometryFrame(geometry)
+        if obb is not None:
+            X_TB = inspector.GetPoseInFrame(geometry) @ obb.pose()
+            boxes.append(m.Box(X_TB.GetAsMatrix4(), np.array(obb.half_width())))
+    return tuple(boxes)
 
 
 class EstimateVisualizer(LeafSystem):
@@ -129,7 +153,7 @@ class EstimateVisualizer(LeafSystem):
     Paths under ``/hand_eye``: ``estimated_camera`` (a triad, hidden before an adoption),
     ``true_camera`` (a thinner, paler triad), ``estimated_point`` (an orange sphere at
     ``X_WH p_HP`` of the adopted estimate; green while observing, orange while identifying)
-    and ``true_point`` (a small white sphere at the true rod tip). Evaluation display only.
+    and ``true_point`` (a small white sphere at the true tool tip). Evaluation display only.
     """
 
     def __init__(self, meshcat, period: float = 1.0 / 15.0, prefix: str = "/hand_eye"):
@@ -193,10 +217,6 @@ def _log(handle, diagram, context, name):
     return log.sample_times(), log.data().T
 
 
-def _at(times, data, t):
-    return data[min(int(np.searchsorted(times, t - 1e-9)), len(times) - 1)]
-
-
 def evaluate(handle, diagram, context) -> dict:
     """The metrics of a run (see the module docstring); pure reading of logs and states."""
     scenario, config = handle.scenario, handle.scenario.hand_eye
@@ -208,9 +228,10 @@ def evaluate(handle, diagram, context) -> dict:
     causes = {e.time: "camera_motion" if e.detail == coordination.CAMERA_MOVED_DETAIL else "observation"
               for e in events if e.kind == coordination.CHANGE_DETECTED}
     t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
-    _, X_WH_log = _log(handle, diagram, context, "X_WH")
+    _, X_HT_log = _log(handle, diagram, context, "true_X_HT")
     _, p_HP_log = _log(handle, diagram, context, "true_p_HP")
     criteria = config.coordination.criteria()
+    points = _followed_points(handle, diagram, context)
 
     adopted = []
     for k, t in enumerate(convergences):
@@ -220,9 +241,11 @@ def evaluate(handle, diagram, context) -> dict:
         identifier = EyeToHandIdentifier(config.coordination.forgetting_factor, criteria)
         identifier.set_state(a.statistic)
         est = a.estimate
-        X_WC = _at(t_pose, X_WC_log, t).reshape(4, 4)
+        X_WC = m.at(t_pose, X_WC_log, t).reshape(4, 4)
         p_true = best_p_HP_given_camera(a.statistic, X_WC[:3, :3], X_WC[:3, 3])
-        rod_tip = _at(t_pose, p_HP_log, t)
+        tool_tip = m.at(t_pose, p_HP_log, t)  # the held tool's tracked_point (any tool.model)
+        point = points[k]  # the physical point this model follows: on the tool or on the hand
+        p_point = point.p_HP(m.at(t_pose, X_HT_log, t).reshape(4, 4))
         adopted.append({
             "time_s": t, "feature_id": a.feature_id, "kind": a.kind, "candidate_found_s": a.admitted,
             "round_start_s": a.round_start, "num_samples": identifier.num_samples,
@@ -232,7 +255,11 @@ def evaluate(handle, diagram, context) -> dict:
             "camera_position_error_along_axis_mm": 1e3 * float((est.p_WC - X_WC[:3, 3]) @ X_WC[:3, 2]),
             "camera_rotation_error_deg": math.degrees(rotation_angle(est.R_WC.T @ X_WC[:3, :3])),
             "tool_point_error_mm": 1e3 * float(np.linalg.norm(est.p_HP - p_true)),
-            "tool_point_distance_to_rod_tip_mm": 1e3 * float(np.linalg.norm(est.p_HP - rod_tip)),
+            "tool_point_distance_to_rod_tip_mm": 1e3 * float(np.linalg.norm(est.p_HP - tool_tip)),
+            "body": point.body,
+            "distance_to_tool_mm": (1e3 * point.distance_to_tool if math.isfinite(point.distance_to_tool)
+                                    else None),
+            "true_point_error_mm": 1e3 * float(np.linalg.norm(est.p_HP - p_point)),
             "expected_rms_mm": 1e3 * math.sqrt(max(est.mean_squared_error, 0.0)),
             # How well the points' views pinned the camera's rotation (identified adoptions only).
             "rotation_lever_mm": 1e3 * a.rotation_lever if math.isfinite(a.rotation_lever) else None,
@@ -256,15 +283,21 @@ def evaluate(handle, diagram, context) -> dict:
     # just before each disturbance and at the end: what the robot works with.
     t_x, x_log = _log(handle, diagram, context, "adopted_x")
     for d in disturbances:
-        d["model_in_use_before"] = _camera_errors(t_x, x_log, t_pose, X_WC_log, d["time_s"] - 0.1)
-    # The worst camera the loop relied on, outside each change's window from the disturbance to
-    # its detection (the model is stale there by definition).
-    stale = [(d["time_s"], math.inf if d["detected_s"] is None else d["detected_s"]) for d in disturbances]
-    worst = _worst_model_in_use(t_x, x_log, t_pose, X_WC_log, stale)
+        d["model_in_use_before"] = m.camera_errors(t_x, x_log, t_pose, X_WC_log, d["time_s"] - 0.1)
+    # The worst camera and tool point the loop relied on, outside each change's window from the
+    # disturbance to its detection (the model is stale there by definition); a change never
+    # detected excuses only the detection target's time after it.
+    windows = m.excused_windows(disturbances, target_bound("hand_eye", "detection_latency_s"))
+    worst = m.worst_model_in_use(t_x, x_log, t_pose, X_WC_log, windows)
+    t_tool, tool = _tool_point_series(handle, diagram, context, points)
+    later = m.before_next(t_tool, tool, disturbances, float(t_tool[-1]))
+    for d, at_later in zip(disturbances, later, strict=True):
+        d["tool_point_in_use_before_next"] = at_later
     refinements = [e.time for e in events if e.kind == coordination.REFINED]
     false_alarms = [t for t in detections
                     if not any(0.0 <= t - d["time_s"] <= config.false_alarm_window for d in disturbances)]
     first = adopted[0] if adopted else None
+    wrong = m.wrong_adoptions(adopted)
     return {
         "convergence_times_s": convergences,
         "detection_times_s": detections,
@@ -280,9 +313,41 @@ def evaluate(handle, diagram, context) -> dict:
             None if first is None else first["time_s"] - first["candidate_found_s"]),
         "observed_fraction": _observed_fraction(handle, diagram, context),
         "refinement_times_s": refinements,
-        "model_in_use_at_end": _camera_errors(t_x, x_log, t_pose, X_WC_log, float(t_x[-1])),
+        "model_in_use_at_end": m.camera_errors(t_x, x_log, t_pose, X_WC_log, float(t_x[-1])),
         "model_in_use_worst": worst,
+        "tool_point_in_use_worst": m.worst_tool_point(t_tool, tool, windows),
+        "tool_point_in_use_worst_including_windows": m.worst_tool_point(t_tool, tool, []),
+        "tool_point_in_use_at_end": m.tool_point_at(t_tool, tool, float(t_tool[-1])),
+        "wrong_adoptions": wrong,
+        "num_wrong_adoptions": len(wrong),
     }
+
+
+def _followed_points(handle, diagram, context) -> list[m.FollowedPoint]:
+    """The physical point each adoption (a CONVERGED event and its ``bank.adoptions`` entry)
+    follows: the point whose ``p_HP`` best explains the adopted statistic under the TRUE camera at
+    the adoption, kept on the held tool or the hand (``hand_eye_metrics.followed_point``)."""
+    events = handle.state_machine.events(handle.state_machine.GetMyContextFromRoot(context))
+    adoptions = handle.candidates.bank(handle.candidates.GetMyContextFromRoot(context)).adoptions
+    convergences = [e.time for e in events if e.kind == coordination.CONVERGED]
+    t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
+    _, X_HT_log = _log(handle, diagram, context, "true_X_HT")
+    points = []
+    for t, a in zip(convergences, adoptions, strict=False):
+        X_WC = m.at(t_pose, X_WC_log, t).reshape(4, 4)
+        p_HP = best_p_HP_given_camera(a.statistic, X_WC[:3, :3], X_WC[:3, 3])
+        points.append(m.followed_point(t, p_HP, m.at(t_pose, X_HT_log, t).reshape(4, 4), handle.tool_boxes))
+    return points
+
+
+def _tool_point_series(handle, diagram, context, points) -> tuple[np.ndarray, np.ndarray]:
+    """The log's times and, at each, the error (m) of the tool point in use (NaN: none in use;
+    ``hand_eye_metrics.tool_point_errors``)."""
+    t_x, x_log = _log(handle, diagram, context, "adopted_x")
+    t_mode, mode = _log(handle, diagram, context, "mode")
+    observing = np.array([m.at(t_mode, mode, t)[0] == coordination.OBSERVE for t in t_x], dtype=bool)
+    t_pose, X_HT_log = _log(handle, diagram, context, "true_X_HT")
+    return t_x, m.tool_point_errors(t_x, x_log, observing, t_pose, X_HT_log, points)
 
 
 def _camera_moves(handle, diagram, context) -> list[float] | None:
@@ -291,34 +356,6 @@ def _camera_moves(handle, diagram, context) -> list[float] | None:
         return None
     times, data = _log(handle, diagram, context, "camera_motion")
     return [float(t) for t in times[1:][np.diff(data[:, 1]) > 0]]
-
-
-def _camera_errors(t_x, x_log, t_pose, X_WC_log, t: float) -> dict | None:
-    """The camera error of the adopted ``x`` logged at ``t`` (None before any adoption)."""
-    x = _at(t_x, x_log, t)
-    if not np.any(x):
-        return None
-    X_WC = _at(t_pose, X_WC_log, t).reshape(4, 4)
-    R_WC, p_WC = x[0:9].reshape(3, 3, order="F"), x[9:12]
-    return {"time_s": t, "camera_position_error_mm": 1e3 * float(np.linalg.norm(p_WC - X_WC[:3, 3])),
-            "camera_rotation_error_deg": math.degrees(rotation_angle(R_WC.T @ X_WC[:3, :3]))}
-
-
-def _worst_model_in_use(t_x, x_log, t_pose, X_WC_log, stale: list) -> dict | None:
-    """The largest camera position and rotation errors of the adopted ``x`` over the log, where
-    one is adopted and outside the ``stale`` windows ``(from, to)``, with their times (None: never
-    adopted there)."""
-    errors = [_camera_errors(t_x, x_log, t_pose, X_WC_log, float(t)) for t in t_x
-              if not any(a <= t <= b for a, b in stale)]
-    errors = [e for e in errors if e is not None]
-    if not errors:
-        return None
-    position = max(errors, key=lambda e: e["camera_position_error_mm"])
-    rotation = max(errors, key=lambda e: e["camera_rotation_error_deg"])
-    return {"camera_position_error_mm": position["camera_position_error_mm"],
-            "position_at_s": position["time_s"],
-            "camera_rotation_error_deg": rotation["camera_rotation_error_deg"],
-            "rotation_at_s": rotation["time_s"]}
 
 
 def _single_point_errors(identifier: EyeToHandIdentifier, X_WC: np.ndarray) -> dict:
@@ -343,7 +380,9 @@ def _observed_fraction(handle, diagram, context) -> float | None:
 
 
 def plot(handle, diagram, context, metrics, path: Path) -> None:
-    """Paper Fig. 9: lambda_13..16, SSD, and s_t against the allowable error, the mode shaded."""
+    """Paper Fig. 9: lambda_13..16, SSD, and s_t against the allowable error, the mode shaded; below
+    them the errors of the model in use over time (the camera's, and the tool point's against the
+    physical point it follows)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -354,7 +393,7 @@ def plot(handle, diagram, context, metrics, path: Path) -> None:
     _, observation = _log(handle, diagram, context, "observation")
     _, sigma = _log(handle, diagram, context, "allowable_error")
     _, mode = _log(handle, diagram, context, "mode")
-    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    fig, axes = plt.subplots(4, 1, figsize=(10, 10.5), sharex=True)
     for k in range(12, 16):
         axes[0].semilogy(t, np.maximum(eig[:, k], 1e-16), label=f"$\\lambda_{{{k + 1}}}$")
     axes[0].set_ylabel("eigenvalues")
@@ -371,6 +410,7 @@ def plot(handle, diagram, context, metrics, path: Path) -> None:
     axes[2].semilogy(t, np.where(observing, sigma[:, 0], np.nan), "r", lw=1, label="allowable error")
     axes[2].set_ylabel("error")
     axes[2].legend(loc="upper right", fontsize=8)
+    _plot_in_use(axes[3], handle, diagram, context)
     for ax in axes:
         _shade(ax, t, observing)
         for d in metrics["disturbances"]:
@@ -379,12 +419,32 @@ def plot(handle, diagram, context, metrics, path: Path) -> None:
             ax.axvline(c, color="g", lw=0.8, ls=":")
         for c in metrics["detection_times_s"]:
             ax.axvline(c, color="r", lw=0.8, ls=":")
-    axes[2].set_xlabel("time (s): OBSERVE shaded; disturbance magenta, convergence green, detection red")
+    axes[3].set_xlabel("time (s): OBSERVE shaded; disturbance magenta, convergence green, detection red")
     fig.tight_layout()
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=110)
     plt.close(fig)
     write_atomically(path, buffer.getvalue())
+
+
+def _plot_in_use(ax, handle, diagram, context) -> None:
+    """The camera in use (position mm, rotation deg on the right axis) and the tool point in use
+    (mm) over time, against the 2 mm target."""
+    t_x, tool = _tool_point_series(handle, diagram, context, _followed_points(handle, diagram, context))
+    _, x_log = _log(handle, diagram, context, "adopted_x")
+    t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
+    camera = [m.camera_errors(t_x, x_log, t_pose, X_WC_log, float(t)) or {} for t in t_x]
+    position = np.array([e.get("camera_position_error_mm", np.nan) for e in camera])
+    rotation = np.array([e.get("camera_rotation_error_deg", np.nan) for e in camera])
+    ax.semilogy(t_x, position, "b", lw=1, label="camera position in use (mm)")
+    ax.semilogy(t_x, 1e3 * tool, "darkorange", lw=1.2, label="tool point in use (mm)")
+    ax.axhline(2.0, color="r", ls="--", lw=0.8)
+    ax.set_ylabel("error in use (mm)")
+    ax.legend(loc="upper left", fontsize=8)
+    right = ax.twinx()
+    right.semilogy(t_x, rotation, "c", lw=0.8, ls="--", label="camera rotation in use (deg)")
+    right.set_ylabel("deg")
+    right.legend(loc="upper right", fontsize=8)
 
 
 def _shade(ax, t, on) -> None:

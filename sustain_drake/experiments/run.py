@@ -35,7 +35,7 @@ from sustain_drake.systems.ground_truth import PoseToVector
 LOGGED_VECTORS = ("joint_positions", "joint_velocities", "head_joint_positions", "wrench",
                   "true_p_HP", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
                   "true_p_KCo", "true_touch")
-LOGGED_POSES = ("X_WH", "true_X_WC")
+LOGGED_POSES = ("X_WH", "true_X_WC", "true_X_HT")
 REPLAY_FPS = 30.0
 
 

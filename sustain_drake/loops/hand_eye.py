@@ -23,7 +23,6 @@ from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceD
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation
 
-
 # rad per pixel of the camera the image thresholds were measured with (640 x 480, 45 deg vertical
 # field of view: f = 579.4 px). A threshold is an angle; at another camera it is that angle times
 # the camera's focal length in px, so it means the same view of the scene at any resolution.

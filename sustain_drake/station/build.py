@@ -30,7 +30,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import AffineSystem, MatrixGain, SharedPointerSystem
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
-from sustain_drake.station.models import make_parser, model_file
+from sustain_drake.station.models import TOOL_FILES, make_parser, model_file
 from sustain_drake.station.scenario import (
     ARM_JOINTS,
     HEAD_JOINTS,
@@ -59,7 +59,6 @@ X_W_ARM = RigidTransform([0.0, 0.0, 0.25])
 # The posters' panel, its poster face 3 cm in front of the back wall's (world x = -2.725), its
 # lower edge 0.3 m below the table top.
 X_W_BACKDROP = RigidTransform([-2.705, 0.0, 0.7])
-TOOL_FILES = {"rod": "rod_tool.sdf", "box": "box_tool.sdf"}
 # The grip is two stiff PD joints (slide along the grasp z, pivot about the closing axis x):
 # a tool slip is a fast move of these joints to new set points.
 GRIP_GAINS = {"tool_slide": PdControllerGains(p=2.0e4, d=200.0),
@@ -67,7 +66,7 @@ GRIP_GAINS = {"tool_slide": PdControllerGains(p=2.0e4, d=200.0),
 SENSOR_JOINT = "ft_sensor"
 HAND_BODY = "gripper"
 # A ceiling light and a dimmer light at the camera: the table and the person's sides are not
-# black (VTK's default is a single headlight).
+# black (VTK's default is a single headlight). A scenario's ``lights`` replace them.
 ROOM_LIGHTS = [
     LightParameter(type="directional", frame="world", direction=[0.3, 0.2, -1.0],
                    intensity=0.8),
@@ -78,7 +77,7 @@ ROOM_LIGHTS = [
 EXPORTED_OUTPUTS = (
     "joint_positions", "joint_velocities", "head_joint_positions", "X_WH", "wrench",
     "color_image", "depth_image", "label_image", "image_time",
-    "true_X_WC", "true_p_HP", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
+    "true_X_WC", "true_p_HP", "true_X_HT", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
     "true_p_KCo", "true_touch", "true_contact",
 )
 
@@ -437,7 +436,8 @@ def _camera_mount(plant: MultibodyPlant, scenario: Scenario):
 
 
 def _add_ground_truth(builder, world: _World, camera_body, X_BC) -> GroundTruth:
-    """Hand pose and the evaluation-only ground truth (camera pose, tool point, masses)."""
+    """Hand pose and the evaluation-only ground truth (camera pose, tool point and pose in the
+    hand, masses)."""
     plant = world.plant
     wrist_roll = plant.GetJointByName(ARM_JOINTS[-1])
     outboard = [b for b in plant.GetBodiesKinematicallyAffectedBy([wrist_roll.index()])
@@ -456,7 +456,7 @@ def _add_ground_truth(builder, world: _World, camera_body, X_BC) -> GroundTruth:
         outboard=[point_mass(plant.get_body(b)) for b in outboard]))
     truth.set_name("ground_truth")
     builder.Connect(plant.get_body_poses_output_port(), truth.get_input_port())
-    for port in ("X_WH", "true_X_WC", "true_p_HP", "true_tool_mass", "true_p_KCm",
+    for port in ("X_WH", "true_X_WC", "true_p_HP", "true_X_HT", "true_tool_mass", "true_p_KCm",
                  "true_outboard_mass", "true_p_KCo"):
         builder.ExportOutput(truth.GetOutputPort(port), port)
     return truth
@@ -469,7 +469,8 @@ def _add_camera(builder, plant, scene_graph, scenario: Scenario, body, X_BS) -> 
     if not scene_graph.HasRenderer(cam.renderer_name):
         rgba = cam.background
         scene_graph.AddRenderer(cam.renderer_name, MakeRenderEngineVtk(RenderEngineVtkParams(
-            default_clear_color=[rgba.r(), rgba.g(), rgba.b()], lights=ROOM_LIGHTS)))
+            default_clear_color=[rgba.r(), rgba.g(), rgba.b()],
+            lights=list(scenario.lights) or ROOM_LIGHTS)))
     color_camera, depth_camera = cam.MakeCameras()
     sensor = builder.AddSystem(RgbdSensor(
         plant.GetBodyFrameIdOrThrow(body.index()), X_BS, color_camera, depth_camera))

@@ -29,6 +29,7 @@ PAGE = Path(__file__).resolve().parents[2] / "docs" / "scenarios.md"
 # Section types documented by Drake, not by us: a link instead of a table.
 DRAKE_DOCS = {
     "CameraConfig": "https://drake.mit.edu/doxygen_cxx/structdrake_1_1systems_1_1sensors_1_1_camera_config.html",
+    "LightParameter": "https://drake.mit.edu/doxygen_cxx/structdrake_1_1geometry_1_1_light_parameter.html",
     "MultibodyPlantConfig": "https://drake.mit.edu/doxygen_cxx/structdrake_1_1multibody_1_1_multibody_plant_config.html",
     "Transform": "https://drake.mit.edu/doxygen_cxx/classdrake_1_1schema_1_1_transform.html",
 }

@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.geometry import LightParameter
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
@@ -29,10 +30,11 @@ from pydrake.systems.sensors import CameraConfig
 from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.loops.hand_eye import HandEyeConfig
 from sustain_drake.loops.payload import KinestheticConfig
+from sustain_drake.station.models import TOOL_FILES
 
 ARM_JOINTS = ("arm_joint1", "arm_joint2", "arm_joint3", "arm_joint4", "arm_joint5")
 HEAD_JOINTS = ("head_pan", "head_tilt")
-TOOL_MODELS = ("rod", "box", "none")
+TOOL_MODELS = (*TOOL_FILES, "none")
 
 
 class ScenarioError(ValueError):
@@ -75,7 +77,12 @@ class HeadConfig:
 class ToolConfig:
     """Which tool is held and its pose in the gripper's grasp frame G."""
 
-    model: str = "rod"  # the held tool: "rod" (0.3 m, 0.1 kg), "box" (0.6 kg) or "none"
+    # the held tool: "rod" (0.3 m, 0.1 kg, a black bar with a yellow checker), "box" (0.6 kg),
+    # "wood_handle" (0.28 m, 0.49 kg: wood grain, two stickers, scratches), "metal_bar" (0.32 m,
+    # 0.33 kg: red paint with slight wear, one logo), "speckle_bar" (0.3 m, 0.24 kg: a fine random
+    # speckle), "plain_bar" (0.3 m, 0.46 kg: one colour, only edges and ends show) or "none"; the
+    # bars are the rod's 50 mm square at the grip, their tip the tracked point as the rod's
+    model: str = "rod"
     # pose of the tool frame T in the grasp frame G (between the fingers, z along the approach)
     X_GT: Transform = field(default_factory=Transform)
     slide: float = 0.0  # m: initial slip along G's z (see ToolSlip), within +-0.15 m (half the rod)
@@ -251,6 +258,13 @@ class Scenario:
     depth_noise: DepthNoiseConfig = field(default_factory=DepthNoiseConfig)  # the depth image's noise
     distractor: DistractorConfig = field(default_factory=DistractorConfig)  # the walking person
     backdrop: BackdropConfig = field(default_factory=BackdropConfig)  # the posters on the back wall
+    # the camera's lights, each a Drake LightParameter (type point, spot or directional; frame world
+    # or camera; position, direction, intensity, color, attenuation_values, cone_angle); empty: the
+    # room's two (a ceiling light of intensity 0.8 and one of 0.5 at the camera, build.ROOM_LIGHTS).
+    # A second set-up, one dimmer light from the arm's side (+y, above, from the camera's side of the
+    # arm), under half the room's: [{type: directional, frame: world, direction: [-0.5, -1.0, -0.5],
+    # intensity: 0.6}]
+    lights: list[LightParameter] = field(default_factory=list)
     # timeline of tool slips, head moves and touches
     disturbances: list[ToolSlip | HeadMove | Touch] = field(default_factory=list)
     # touching the table after the identification

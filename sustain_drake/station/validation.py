@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 from pydrake.common.schema import Rotation, Transform
-from pydrake.geometry import Rgba
+from pydrake.geometry import LightParameter, Rgba
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
@@ -117,6 +117,10 @@ RANGES: dict[type, dict[str, Range]] = {
     CameraConfig.FocalLength: {"x": _above(0, 100_000, "px"), "y": _above(0, 100_000, "px")},
     CameraConfig.FovDegrees: {"x": _above(0, 170, "deg"), "y": _above(0, 170, "deg")},
     Rgba: {"rgba": FRACTION},
+    # the camera's lights: Drake's default intensity is 1; a spot's cone_angle is its half-angle
+    LightParameter: {"intensity": _from(0, 100), "cone_angle": _from(0, 90, "deg"),
+                     "position": _from(-100, 100, "m"), "direction": _from(-1000, 1000),
+                     "attenuation_values": _from(0, 1000)},
     HeadConfig: {"pan": _from(-math.pi, math.pi, "rad"), "tilt": _from(-math.pi, math.pi, "rad")},
     ToolConfig: {
         # a slip in the grasp: up to half the rod's length, a quarter turn
@@ -224,6 +228,8 @@ POSES = {"head.X_WP": (5.0, "the world"), "tool.X_GT": (0.5, "the grasp frame G"
          "camera.X_PB": (1.0, None), "camera.X_BC": (1.0, "the camera body B"),
          "camera.X_BD": (1.0, "the camera body B")}
 
+# Drake's accepted strings of a light (LightParameter, as RenderEngineVtk reads it).
+LIGHT_STRINGS = {"type": ("point", "spot", "directional"), "frame": ("world", "camera")}
 # Drake's accepted strings (MultibodyPlantConfig; see its documentation).
 PLANT_STRINGS = {
     "contact_model": ("point", "hydroelastic", "hydroelastic_with_fallback"),
@@ -335,6 +341,7 @@ def _validate(s: Scenario) -> None:
     _check(isinstance(s.camera.renderer_class, str) and s.camera.renderer_class in ("", "RenderEngineVtk"),
            "camera.renderer_class: only Drake's VTK renderer is supported (headless): leave it out")
     _check_numbers(s, "")
+    _check_lights(s.lights)
 
     m = s.motion
     _check(len(m.joint_ranges) == len(ARM_JOINTS)
@@ -362,6 +369,26 @@ def _validate(s: Scenario) -> None:
     _check(not s.kinesthetic.enabled or s.tool.model == "box", "kinesthetic: needs tool.model: box "
            "(the tool with a collision shape to locate touches on)")
     _check_math_layer(s)
+
+
+def _check_lights(lights) -> None:
+    """Each light's strings (Drake's), a direction for a light that shines along one, a spot's cone
+    and a point or spot light's fall-off (its numbers' ranges are checked with the others)."""
+    for i, light in enumerate(lights):
+        where = f"lights[{i}]"
+        for key, accepted in LIGHT_STRINGS.items():
+            value = getattr(light, key)
+            _check(value in accepted, f"{where}.{key} must be one of "
+                   f"{', '.join(repr(a) for a in accepted)}, got {shown(value)}")
+        if light.type != "point":
+            _check(bool(np.linalg.norm(light.direction) > 1e-9),
+                   f"{where}.direction must not be zero (a {light.type} light shines along it)")
+        if light.type == "spot":
+            _check(light.cone_angle > 0, f"{where}.cone_angle must be above 0 deg for a spot light, "
+                   f"got {shown(light.cone_angle)}")
+        if light.type != "directional":
+            _check(bool(np.any(light.attenuation_values > 0)), f"{where}.attenuation_values: at "
+                   "least one of [constant, linear, quadratic] must be above 0")
 
 
 def _check_timeline(s: Scenario) -> None:

@@ -31,6 +31,7 @@ class GroundTruth(LeafSystem):
         - X_WH
         - true_X_WC
         - true_p_HP
+        - true_X_HT
         - true_tool_mass
         - true_p_KCm
         - true_outboard_mass
@@ -43,6 +44,8 @@ class GroundTruth(LeafSystem):
     - ``true_X_WC`` (``RigidTransform``): the camera's colour frame C in the world (Drake's
       camera convention: +z out of the lens, +x right, +y down).
     - ``true_p_HP`` (3, m): the tracked tool point P in H (the grasp point if no tool).
+    - ``true_X_HT`` (``RigidTransform``): the held tool's body frame T (the frame of the tracked
+      point's body) in H; it changes when the tool slips in the grasp (identity if no tool).
     - ``true_tool_mass`` (1, kg) and ``true_p_KCm`` (3, m): the HELD TOOL ALONE, its mass and
       centre of mass in the sensor frame K (0 and the origin when no tool is held).
     - ``true_outboard_mass`` (1, kg) and ``true_p_KCo`` (3, m): everything outboard of the
@@ -74,6 +77,9 @@ class GroundTruth(LeafSystem):
             "true_X_WC", lambda: AbstractValue.Make(RigidTransform()),
             lambda c, o: o.set_value(self._X_W(c, self._camera) @ self._X_BC), poses_only)
         self.DeclareVectorOutputPort("true_p_HP", BasicVector(3), self._calc_p_HP, poses_only)
+        self.DeclareAbstractOutputPort(
+            "true_X_HT", lambda: AbstractValue.Make(RigidTransform()),
+            lambda c, o: o.set_value(self._X_HT(self._poses.Eval(c))), poses_only)
         self.DeclareVectorOutputPort(
             "true_tool_mass", BasicVector(1),
             lambda c, o: o.SetFromVector([tool.mass if tool else 0.0]), poses_only)
@@ -89,10 +95,12 @@ class GroundTruth(LeafSystem):
     def _X_KW(self, poses: list) -> RigidTransform:
         return (poses[self._hand] @ self._X_HK).inverse()
 
+    def _X_HT(self, poses: list) -> RigidTransform:
+        return poses[self._hand].inverse() @ poses[self._tool_body]
+
     def _calc_p_HP(self, context, output) -> None:
         poses = self._poses.Eval(context)  # once: each Eval converts every body's pose to Python
-        X_HT = poses[self._hand].inverse() @ poses[self._tool_body]
-        output.SetFromVector(X_HT @ self._p_TP)
+        output.SetFromVector(self._X_HT(poses) @ self._p_TP)
 
     def _com_in_K(self, context, masses: list[PointMass]) -> np.ndarray:
         total = sum(b.mass for b in masses)
