@@ -86,10 +86,10 @@ class Joint:
     velocity: float = 3.14  # UR5e: 180 deg/s at every joint
 
 
-# The arm at q = 0 stands straight up (upper arm and forearm along +z, the wrist's second offset
-# along +z too); the joint axes are z (pan), y (lift, elbow, wrist 1), z (wrist 2) and -y (wrist 3),
-# so the flange faces -y, on the side of the lateral offset, as on a UR arm. A positive lift or elbow
-# angle tips the arm towards +x.
+# The arm at q = 0 stands straight up (upper arm and forearm along +z), the wrist's second link out
+# towards -x, the flange facing up; the joint axes are z (pan), y (lift, elbow, wrist 1), -x (wrist 2)
+# and z (wrist 3). A positive lift or elbow angle tips the arm towards +x. Every link frame is
+# parallel to the base's at q = 0, so the gripper's frame is exactly the flange's (K = H exactly).
 LINKS = (
     Link("ur_base", (0, 0, 0), 2.5, (Cylinder("base", "z", 0.075, 0.086, (0, 0, 0.043), DARK),)),
     Link("shoulder_link", (0, 0, D1), 3.7, (
@@ -105,12 +105,12 @@ LINKS = (
         Cylinder("forearm", "z", 0.038, 0.30, (0, 0, 0.2), TUBE)), "upper_arm_link"),
     Link("wrist_1_link", (0, 0, A3), 1.2, (
         Cylinder("wrist_1_housing", "y", 0.045, 0.10, (0, 0, 0), HOUSING),), "forearm_link"),
-    Link("wrist_2_link", (0, 0, D5), 1.2, (
-        Cylinder("wrist_2_housing", "z", 0.045, 0.10, (0, 0, -0.01), HOUSING),
-        Cylinder("wrist_3_housing", "y", 0.045, 0.07, (0, -0.035, 0), HOUSING)), "wrist_1_link"),
+    Link("wrist_2_link", (-D5, 0, 0), 1.2, (
+        Cylinder("wrist_2_housing", "x", 0.045, 0.10, (0.01, 0, 0), HOUSING),
+        Cylinder("wrist_3_housing", "z", 0.045, 0.07, (0, 0, 0.035), HOUSING)), "wrist_1_link"),
     Link("wrist_3_link", (0, 0, 0), 0.35, (
-        Cylinder("flange_plate", "y", 0.032, 0.02, (0, -0.08, 0), TUBE),
-        Cylinder("ft_sensor", "y", 0.03, 0.0096, (0, -(D6 - 0.0048), 0), SENSOR)), "wrist_2_link"),
+        Cylinder("flange_plate", "z", 0.032, 0.02, (0, 0, 0.08), TUBE),
+        Cylinder("ft_sensor", "z", 0.03, 0.0096, (0, 0, D6 - 0.0048), SENSOR)), "wrist_2_link"),
 )
 # UR5e's joint ranges (+-360 deg, the elbow +-180 deg) and torques (150 N m at the size-3 joints,
 # 28 N m at the wrists); damping like arm.sdf's; gains near critical damping for these inertias.
@@ -119,12 +119,11 @@ JOINTS = (
     Joint("shoulder_lift_joint", "shoulder_link", "upper_arm_link", "0 1 0", TWO_PI, 150, 0.1, 6000, 300),
     Joint("elbow_joint", "upper_arm_link", "forearm_link", "0 1 0", np.pi, 150, 0.1, 3000, 150),
     Joint("wrist_1_joint", "forearm_link", "wrist_1_link", "0 1 0", TWO_PI, 28, 0.05, 400, 15),
-    Joint("wrist_2_joint", "wrist_1_link", "wrist_2_link", "0 0 1", TWO_PI, 28, 0.05, 300, 10),
-    Joint("wrist_3_joint", "wrist_2_link", "wrist_3_link", "0 -1 0", TWO_PI, 28, 0.02, 100, 3),
+    Joint("wrist_2_joint", "wrist_1_link", "wrist_2_link", "-1 0 0", TWO_PI, 28, 0.05, 300, 10),
+    Joint("wrist_3_joint", "wrist_2_link", "wrist_3_link", "0 0 1", TWO_PI, 28, 0.02, 100, 3),
 )
 # The flange (tool0): D6 out along the wrist 3 axis, its z out of the flange.
-FLANGE = (f'<frame name="flange" attached_to="wrist_3_link"><pose>0 {-D6:g} 0 1.5707963267948966 0 0</pose>'
-          "</frame>")
+FLANGE = f'<frame name="flange" attached_to="wrist_3_link"><pose>0 0 {D6:g} 0 0 0</pose></frame>'
 
 
 def inertial(link: Link) -> tuple[np.ndarray, np.ndarray]:
@@ -202,8 +201,9 @@ HEADER = """<?xml version="1.0"?>
   A 6-DOF arm with UR5e-like kinematics (shoulder 0.1625 m above the base, upper arm 0.425 m,
   forearm 0.3922 m, wrist offsets 0.1333 / 0.0997 / 0.0996 m) and its own look (round aluminium
   tubes, light blue joint housings). Joints: shoulder_pan_joint (z), shoulder_lift_joint (y),
-  elbow_joint (y), wrist_1_joint (y), wrist_2_joint (z), wrist_3_joint (-y), all PD-controlled
-  actuators (drake:controller_gains). At q = 0 the arm stands straight up and the flange faces -y.
+  elbow_joint (y), wrist_1_joint (y), wrist_2_joint (-x), wrist_3_joint (z), all PD-controlled
+  actuators (drake:controller_gains). At q = 0 the arm stands straight up, the wrist's second link
+  points to -x and the flange faces up.
   The flange frame (tool0) is on wrist_3_link, z out of the flange; the F/T sensor weld ft_sensor
   (wrist_3_link -> gripper) puts arm.sdf's gripper on it, so K = H = the gripper body frame and
   the grasp frame is where tools attach, as on arm.sdf.
