@@ -35,7 +35,7 @@ from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.loops.hand_eye import add_hand_eye_loop
 from sustain_drake.station import ScenarioError, camera_info
-from sustain_drake.station.scenario import ARM_JOINTS, HeadMove, ToolSlip
+from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
@@ -69,9 +69,9 @@ def build_loop(builder, station, scenario):
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("depth_image")):
         raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
     try:
-        loop = add_hand_eye_loop(builder, camera_info(scenario), len(ARM_JOINTS), scenario.camera.fps,
-                                 config, perception, scenario.motion.joint_ranges,
-                                 scenario.motion.seed)  # fmt: skip
+        loop = add_hand_eye_loop(builder, camera_info(scenario), len(arm_of(scenario).joints),
+                                 scenario.camera.fps, config, perception,
+                                 arm_motion(scenario).joint_ranges, scenario.motion.seed)  # fmt: skip
     except ValueError as e:
         raise ScenarioError(f"hand_eye: {e}") from None
     candidates, machine = loop.candidates, loop.state_machine
