@@ -4,6 +4,7 @@
 
     .venv/bin/python bench/bench_scene_matrix.py --split tuning [--cells 0 1] [--workers 2] [--results]
     .venv/bin/python bench/bench_scene_matrix.py --split held_out [--results]
+    .venv/bin/python bench/bench_scene_matrix.py --split tuning --arm second  (the second arm's cells)
 
 Every cell is a whole run (110 s) of diagrams/hand_eye.yaml with the code's default hand-eye
 settings in another scene: camera placement, resolution, tool, lighting, the person's path, the
@@ -22,7 +23,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_hand_eye import _fmt  # noqa: E402
 from common import bench_main, failed, metrics_of  # noqa: E402
-from make_scene_matrix import design  # noqa: E402
+from make_scene_matrix import design, second_arm_design  # noqa: E402
 
 SPLITS = ("tuning", "held_out")
 
@@ -32,13 +33,17 @@ def _met_all(row) -> bool:
     return bool(columns) and all(row[k] is True or row[k] == 1 for k in columns)
 
 
-def row_maker(split: str):
-    cells = design()[split]
+def _scene(c: dict) -> str:
+    if "placement" not in c:  # the second arm's cells
+        return (f"second arm, 640x480, {c['tool']}, {c['lights']}, person behind, {c['disturbances']}, "
+                f"seed {c['seed']}")
+    return (f"{c['placement']}, {c['camera']}, {c['tool']}, {c['lights']}, person {c['person']}, "
+            f"{c['disturbances']}, seed {c['seed']}")
 
+
+def row_maker(cells: list[dict]):
     def row_text(row) -> str:
-        c = cells[int(row["cell"])]
-        scene = (f"{c['placement']}, {c['camera']}, {c['tool']}, {c['lights']}, person {c['person']}, "
-                 f"{c['disturbances']}, seed {c['seed']}")
+        scene = _scene(cells[int(row["cell"])])
         if failed(row):
             return f"| {row['cell']} | {scene} | failed: {row['error']} | | | | | | no |"
         m = metrics_of(row, "hand_eye")
@@ -67,14 +72,17 @@ COLUMNS = ["cell", "scene: placement, camera, tool, lights, person, disturbances
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(add_help=False)
     parser.add_argument("--split", choices=SPLITS, required=True)
+    parser.add_argument("--arm", choices=("first", "second"), default="first")
     args, rest = parser.parse_known_args(argv)
+    name = "scene_matrix" if args.arm == "first" else "scene_matrix_second_arm"
+    cells = (design() if args.arm == "first" else second_arm_design())[args.split]
 
     def every_target(table) -> list[str]:
         met = sum(_met_all(r) for _, r in table.iterrows())
         return [f"- every hand-eye target: met on {met} of {len(table)} cells ({args.split} set)"]
 
-    return bench_main(rest, __doc__, f"scene_matrix_{args.split}.yaml", "hand_eye", COLUMNS,
-                      row_maker(args.split), extra=every_target, block=f"bench_scene_matrix_{args.split}")
+    return bench_main(rest, __doc__, f"{name}_{args.split}.yaml", "hand_eye", COLUMNS,
+                      row_maker(cells), extra=every_target, block=f"bench_{name}_{args.split}")
 
 
 if __name__ == "__main__":

@@ -16,7 +16,10 @@ whole run with a slip and a camera move. Axes and their values:
   camera moves (0.03 to 0.2 rad); without a tool, the camera moves only;
 - the motion seed (the seed axis: motion, sensor noise and the person's start).
 
-Each split holds every value of every axis at least twice (a balanced shuffle per axis).
+Each split holds every value of every axis at least twice (a balanced shuffle per axis). The second
+arm (diagrams/second_arm.yaml, the code's default settings) has eight cells of its own, four per
+split: its own camera placement, four textured tools, the lightings and the timelines
+(``scene_matrix_second_arm_{tuning,held_out}.yaml``).
 """
 
 from __future__ import annotations
@@ -191,6 +194,48 @@ def sweep_text(split: str, cells: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+# The second arm (diagrams/second_arm.yaml: its own head 45 deg around it, the person behind it),
+# with the code's default settings: the tools with texture, the lightings and the timelines vary.
+SECOND_ARM_CELLS_PER_SPLIT = 4
+SECOND_ARM_TOOLS = ("rod", "wood_handle", "speckle_bar", "metal_bar")
+SECOND_ARM_TILT = 0.1  # rad: second_arm.yaml's head
+
+
+def second_arm_design() -> dict[str, list[dict]]:
+    """The second arm's cells of each split (drawn after ``design``'s, from their own stream)."""
+    rng = np.random.default_rng(SEED + 1)
+    n = SECOND_ARM_CELLS_PER_SPLIT
+    seeds = rng.permutation(np.arange(200, 200 + 2 * n)).tolist()
+    tools = _balanced(SECOND_ARM_TOOLS, 2 * n, rng)
+    timelines = _balanced(DISTURBANCES, 2 * n, rng)
+    lights = _balanced(LIGHTS, 2 * n, rng)
+    return {split: [{"tool": tools[k * n + i], "disturbances": timelines[k * n + i],
+                     "lights": lights[k * n + i], "seed": seeds[k * n + i]} for i in range(n)]
+            for k, split in enumerate(("tuning", "held_out"))}
+
+
+def second_arm_sweep_text(split: str, cells: list[dict]) -> str:
+    def timeline(c):
+        slips, moves = DISTURBANCES[c["disturbances"]]
+        items = [f"!ToolSlip {{time: {t}, slide: {s}, pivot: {p}, duration: 0.1}}" for t, s, p in slips]
+        items += [f"!HeadMove {{time: {t}, pan: {_yaml_float(0.6 * a)}, "
+                  f"tilt: {_yaml_float(SECOND_ARM_TILT + 0.8 * a)}, duration: 0.5}}" for t, a in moves]
+        return "[" + ", ".join(items) + "]"
+
+    lines = [f"# The second arm's cells of the scene matrix, {split.replace('_', '-')} set (issue 27):",
+             "# written by bench/make_scene_matrix.py; do not edit by hand.",
+             f"#   .venv/bin/python bench/bench_scene_matrix.py --split {split} --arm second", "# Cells:"]
+    lines += [f"#   {i}: {c['tool']}, lights {c['lights']}, disturbances {c['disturbances']}, "
+              f"seed {c['seed']}" for i, c in enumerate(cells)]
+    lines += ["scenario: ../second_arm.yaml", "scenario_name: second_arm", f"duration: {DURATION}", "zip:"]
+    columns = {"seed": [str(c["seed"]) for c in cells], "tool.model": [c["tool"] for c in cells],
+               "lights": [_lights(c["lights"]) for c in cells], "disturbances": [timeline(c) for c in cells]}
+    for axis, values in columns.items():
+        lines.append(f"  {axis}:")
+        lines += [f"    - {v}" for v in values]
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=SWEEPS, help="folder of the sweep files")
@@ -198,6 +243,10 @@ def main(argv=None) -> int:
     for split, cells in design().items():
         path = args.out / f"scene_matrix_{split}.yaml"
         path.write_text(sweep_text(split, cells))
+        print(path)
+    for split, cells in second_arm_design().items():
+        path = args.out / f"scene_matrix_second_arm_{split}.yaml"
+        path.write_text(second_arm_sweep_text(split, cells))
         print(path)
     return 0
 

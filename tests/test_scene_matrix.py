@@ -60,3 +60,13 @@ def test_the_heads_aim_at_the_workspace():
                          -np.sin(p["tilt"])])
         d = make_scene_matrix.TARGET - eye
         assert np.linalg.norm(d - (d @ axis) * axis) < 0.01, name
+
+
+@pytest.mark.parametrize("split", ["tuning", "held_out"])
+def test_the_second_arms_cells_are_the_generators_and_load(split):
+    cells = make_scene_matrix.second_arm_design()[split]
+    path = make_scene_matrix.SWEEPS / f"scene_matrix_second_arm_{split}.yaml"
+    assert path.read_text() == make_scene_matrix.second_arm_sweep_text(split, cells)
+    sweep = load_sweep(path)
+    assert len(sweep.cells) == make_scene_matrix.SECOND_ARM_CELLS_PER_SPLIT
+    assert "model: ur_arm" in sweep.cells[0].scenario_text

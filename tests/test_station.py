@@ -22,6 +22,7 @@ from sustain_drake.station.scenario import (
     HeadMove,
     Scenario,
     ToolSlip,
+    arm_of,
     load_scenario_string,
 )
 
@@ -61,7 +62,7 @@ def test_each_scenario_builds_and_simulates_half_a_second(path):
         value = diagram.GetOutputPort(name).Eval(context)
         assert np.all(np.isfinite(value)), name
     q = diagram.GetOutputPort("joint_positions").Eval(context)
-    assert q.shape == (5,)
+    assert q.shape == (len(arm_of(scenario).joints),)  # 5 on the first arm, 6 on the second
 
 
 def test_hand_eye_timeline_is_the_papers():

@@ -38,7 +38,7 @@ from sustain_drake.perception.evaluation import (
 )
 from sustain_drake.perception.optical_flow import CellGrid
 from sustain_drake.station import camera_info
-from sustain_drake.station.scenario import ARM_JOINTS, ScenarioError
+from sustain_drake.station.scenario import ScenarioError, arm_of
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 
@@ -161,6 +161,7 @@ class BodyDetectionHandle:
     tracker: OpticalFlowTracker
     detector: MotionCoincidenceDetector
     evaluation: BodyDetectionEvaluation | None
+    num_joints: int  # the arm's actuators the detector relates image motion to
 
 
 def body_labels(station, scenario) -> tuple[tuple[int, ...], tuple[int, ...]]:
@@ -174,7 +175,7 @@ def body_labels(station, scenario) -> tuple[tuple[int, ...], tuple[int, ...]]:
             return []
         return [int(b) for b in plant.GetBodyIndices(plant.GetModelInstanceByName(name))]
 
-    robot = [b for b in instance_bodies("arm") if b not in static]
+    robot = [b for b in instance_bodies(scenario.arm.model) if b not in static]
     if plant.HasBodyNamed("tool"):  # any tool.model: its instance (the tool and its grip links)
         robot += instance_bodies(plant.GetModelInstanceName(plant.GetBodyByName("tool").model_instance()))
     person = instance_bodies("person")
@@ -186,9 +187,9 @@ def add_to_diagram(builder, station, scenario, meshcat=None) -> BodyDetectionHan
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("image_time")):
         raise ScenarioError("body_detection needs the camera's color image (camera.rgb: true)")
     info = camera_info(scenario)
-    period = 1.0 / scenario.camera.fps
+    period, n_a = 1.0 / scenario.camera.fps, len(arm_of(scenario).joints)
     try:
-        loop = add_body_detection(builder, info, len(ARM_JOINTS), scenario.camera.fps, config)
+        loop = add_body_detection(builder, info, n_a, scenario.camera.fps, config)
     except ValueError as e:
         raise ScenarioError(f"body_detection: {e}") from None
     tracker, detector = loop.tracker, loop.detector
@@ -208,7 +209,7 @@ def add_to_diagram(builder, station, scenario, meshcat=None) -> BodyDetectionHan
     if station.HasOutputPort("label_image"):
         robot, person = body_labels(station, scenario)
         evaluation = builder.AddSystem(BodyDetectionEvaluation(
-            tracker.grid, len(ARM_JOINTS), robot, person, period=period, offset=0.75 * period,
+            tracker.grid, n_a, robot, person, period=period, offset=0.75 * period,
             body_cover=config.body_cover, score_features=config.score_features,
             snapshot_times=config.snapshot_times))
         evaluation.set_name("body_detection_evaluation")
@@ -218,7 +219,7 @@ def add_to_diagram(builder, station, scenario, meshcat=None) -> BodyDetectionHan
             builder.Connect(detector.GetOutputPort(name), evaluation.GetInputPort(name))
         builder.Connect(tracker.GetOutputPort("visual_change"),
                         evaluation.GetInputPort("visual_change"))
-    return BodyDetectionHandle(config, station, tracker, detector, evaluation)
+    return BodyDetectionHandle(config, station, tracker, detector, evaluation, n_a)
 
 
 def _summary_line(m: dict) -> str:
@@ -239,7 +240,7 @@ def finish(handle: BodyDetectionHandle, diagram, context, out_dir) -> dict:
     detector_ctx = handle.detector.GetMyContextFromRoot(context)
     station_ctx = handle.station.GetMyContextFromRoot(context)
     grid = handle.tracker.grid
-    n_a = len(ARM_JOINTS)
+    n_a = handle.num_joints
     s = handle.detector.detector_state(detector_ctx)
     rule = handle.detector.params
     features = handle.detector.GetOutputPort("feature_on_body").Eval(detector_ctx)

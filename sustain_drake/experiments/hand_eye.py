@@ -39,7 +39,7 @@ from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.loops.hand_eye import add_hand_eye_loop
 from sustain_drake.station import ScenarioError, camera_info
-from sustain_drake.station.scenario import ARM_JOINTS, HeadMove, ToolSlip
+from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
@@ -74,9 +74,9 @@ def build_loop(builder, station, scenario):
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("depth_image")):
         raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
     try:
-        loop = add_hand_eye_loop(builder, camera_info(scenario), len(ARM_JOINTS), scenario.camera.fps,
-                                 config, perception, scenario.motion.joint_ranges,
-                                 scenario.motion.seed)  # fmt: skip
+        loop = add_hand_eye_loop(builder, camera_info(scenario), len(arm_of(scenario).joints),
+                                 scenario.camera.fps, config, perception,
+                                 arm_motion(scenario).joint_ranges, scenario.motion.seed)  # fmt: skip
     except ValueError as e:
         raise ScenarioError(f"hand_eye: {e}") from None
     candidates, machine = loop.candidates, loop.state_machine
@@ -307,8 +307,9 @@ def evaluate(handle, diagram, context) -> dict:
         "disturbances": disturbances,
         "false_alarms_s": false_alarms,
         "num_false_alarms": len(false_alarms),
+        # From the run's first candidate (a reset before the first convergence does not restart it).
         "first_convergence_after_found_s": (
-            None if first is None else first["time_s"] - first["round_start_s"]),
+            None if first is None else first["time_s"] - bank.first_found),
         "first_convergence_after_adopted_feature_found_s": (
             None if first is None else first["time_s"] - first["candidate_found_s"]),
         "observed_fraction": _observed_fraction(handle, diagram, context),

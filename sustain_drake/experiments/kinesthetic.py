@@ -26,7 +26,7 @@ from sustain_drake.files import write_atomically
 from sustain_drake.identification import coordination
 from sustain_drake.loops.payload import add_payload_loop
 from sustain_drake.station import held_shape, sensor_pose_in_hand
-from sustain_drake.station.scenario import ARM_JOINTS
+from sustain_drake.station.scenario import arm_of
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.sustainable_identifier_system import SustainableIdentifierSystem
 from sustain_drake.systems.touch_estimator import TouchEstimator
@@ -50,7 +50,7 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
     if not sensor_pose_in_hand(station).IsExactlyIdentity():
         raise ValueError("kinesthetic: the sensor frame K must be the hand frame H (X_WH is used as X_WK)")
     shape, X_KG = held_shape(station)
-    loop = add_payload_loop(builder, len(ARM_JOINTS), config, shape, X_KG)
+    loop = add_payload_loop(builder, len(arm_of(scenario).joints), config, shape, X_KG)
     ident, sm, gate, estimator = loop.identifier, loop.state_machine, loop.gate, loop.estimator
 
     wrench, X_WK = station.GetOutputPort("wrench"), station.GetOutputPort("X_WH")  # K = H

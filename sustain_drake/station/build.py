@@ -30,15 +30,16 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import AffineSystem, MatrixGain, SharedPointerSystem
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
-from sustain_drake.station.models import TOOL_FILES, make_parser, model_file
+from sustain_drake.station.models import TOOL_FILES, ArmModel, make_parser, model_file
 from sustain_drake.station.scenario import (
-    ARM_JOINTS,
     HEAD_JOINTS,
     HeadMove,
     Scenario,
     ScenarioError,
     ToolSlip,
     Touch,
+    arm_motion,
+    arm_of,
     validate_scenario,
 )
 from sustain_drake.station.touch_plan import touch_postures
@@ -64,7 +65,6 @@ X_W_BACKDROP = RigidTransform([-2.705, 0.0, 0.7])
 GRIP_GAINS = {"tool_slide": PdControllerGains(p=2.0e4, d=200.0),
               "tool_pivot": PdControllerGains(p=500.0, d=5.0)}
 SENSOR_JOINT = "ft_sensor"
-HAND_BODY = "gripper"
 # A ceiling light and a dimmer light at the camera: the table and the person's sides are not
 # black (VTK's default is a single headlight). A scenario's ``lights`` replace them.
 ROOM_LIGHTS = [
@@ -137,6 +137,7 @@ class _World:
 
     plant: MultibodyPlant
     scene_graph: SceneGraph
+    arm_model: ArmModel  # the arm's model file, joints and hand
     arm: ModelInstanceIndex
     head: ModelInstanceIndex
     person: ModelInstanceIndex | None
@@ -146,7 +147,12 @@ class _World:
 
     @property
     def hand(self) -> RigidBody:
-        return self.plant.GetBodyByName(HAND_BODY)
+        return self.plant.GetBodyByName(self.arm_model.hand_body, self.arm)
+
+    @property
+    def joints(self) -> list:
+        """The arm's babbling joints, base to hand."""
+        return [self.plant.GetJointByName(name, self.arm) for name in self.arm_model.joints]
 
     @property
     def X_HK(self) -> RigidTransform:
@@ -164,7 +170,8 @@ def held_shape(station):
     if len(geometries) != 1:
         raise ValueError(f"the held tool needs exactly one collision geometry, it has {len(geometries)}")
     context = plant.CreateDefaultContext()
-    X_WK = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName(HAND_BODY)) @ sensor_pose_in_hand(station)
+    hand = plant.GetJointByName(SENSOR_JOINT).child_body()
+    X_WK = plant.EvalBodyPoseInWorld(context, hand) @ sensor_pose_in_hand(station)
     X_KG = X_WK.inverse() @ plant.EvalBodyPoseInWorld(context, tool) @ inspector.GetPoseInFrame(geometries[0])
     return inspector.GetShape(geometries[0]), RigidTransform(X_KG)
 
@@ -230,10 +237,11 @@ def _add_world(builder: DiagramBuilder, scenario: Scenario) -> _World:
     the scenario's initial state (arm posture, closed gripper, head angles)."""
     plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
     parser = make_parser(plant)
-    arm = parser.AddModels(model_file("arm.sdf"))[0]
+    arm_model = arm_of(scenario)
+    arm = parser.AddModels(model_file(arm_model.file))[0]
     head = parser.AddModels(model_file("head.sdf"))[0]
     table = parser.AddModels(model_file("table.sdf"))[0]
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("arm_base", arm), X_W_ARM)
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(arm_model.base_frame, arm), X_W_ARM)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table), X_W_TABLE)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("head_post", head),
                      _deterministic(scenario.head.X_WP, "head.X_WP"))
@@ -248,8 +256,8 @@ def _add_world(builder: DiagramBuilder, scenario: Scenario) -> _World:
         tool = parser.AddModels(model_file(TOOL_FILES[scenario.tool.model]))[0]
         tool_body = _add_grip(plant, scenario, arm, tool)
 
-    joints = [plant.GetJointByName(j) for j in ARM_JOINTS]
-    posture = np.clip(scenario.motion.initial_posture,
+    joints = [plant.GetJointByName(j, arm) for j in arm_model.joints]
+    posture = np.clip(arm_motion(scenario).initial_posture,
                       [j.position_lower_limits()[0] for j in joints],
                       [j.position_upper_limits()[0] for j in joints])
     for joint, angle in zip(joints, posture, strict=True):
@@ -258,13 +266,12 @@ def _add_world(builder: DiagramBuilder, scenario: Scenario) -> _World:
     plant.GetJointByName("head_pan").set_default_angle(scenario.head.pan)
     plant.GetJointByName("head_tilt").set_default_angle(scenario.head.tilt)
     plant.Finalize()
-    return _World(plant, scene_graph, arm, head, person, tool, tool_body, posture)
+    return _World(plant, scene_graph, arm_model, arm, head, person, tool, tool_body, posture)
 
 
 def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
-    """Babbling arm: the 5 joints from the motion generator, the gripper held closed."""
-    plant, m = world.plant, scenario.motion
-    joints = [plant.GetJointByName(j) for j in ARM_JOINTS]
+    """Babbling arm: its joints from the motion generator, the gripper held closed."""
+    m, joints = arm_motion(scenario), world.joints
     lower = [max(r[0], j.position_lower_limits()[0])
              for r, j in zip(m.joint_ranges, joints, strict=True)]
     upper = [min(r[1], j.position_upper_limits()[0])
@@ -276,8 +283,13 @@ def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
         min_duration=m.min_duration, dwell=m.dwell, period=m.period,
         confirm_hold=m.confirm_hold, confirm_step=m.confirm_step, confirm_near=m.confirm_near))
     motion.set_name("motion_generator")
-    n = len(ARM_JOINTS)
-    # The arm instance's desired state is [q_1..q_5, q_grip, v_1..v_5, v_grip].
+    n = len(joints)
+    # The arm instance's desired state is [q_1..q_n, q_grip, v_1..v_n, v_grip] (by actuator).
+    actuated = [world.plant.get_joint_actuator(a).joint().name()
+                for a in world.plant.GetJointActuatorIndices(world.arm)]
+    if actuated != [*world.arm_model.joints, "gripper_joint"]:
+        raise ScenarioError(f"arm model {world.arm_model.file}: its actuators must be its joints in "
+                            "order, then gripper_joint")
     D = np.zeros((2 * n + 2, 2 * n))
     D[:n, :n] = np.eye(n)
     D[n + 1:2 * n + 1, n:] = np.eye(n)
@@ -287,7 +299,7 @@ def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
     arm_desired.set_name("arm_desired_state")
     builder.Connect(_add_touch_motion(builder, world, scenario, motion.get_output_port()),
                     arm_desired.get_input_port())
-    builder.Connect(arm_desired.get_output_port(), plant.get_desired_state_input_port(world.arm))
+    builder.Connect(arm_desired.get_output_port(), world.plant.get_desired_state_input_port(world.arm))
     if m.gravity_compensation:
         _add_arm_gravity_compensation(builder, world)
     builder.ExportInput(motion.GetInputPort("pause"), "motion_pause")
@@ -299,9 +311,9 @@ def _add_arm_gravity_compensation(builder, world: _World) -> None:
     PD), computed on a controller model of the arm alone: the held tool is unknown to the robot."""
     # SharedPointerSystem: the diagram keeps the controller model alive as long as it lives.
     controller_plant = SharedPointerSystem.AddToBuilder(builder, MultibodyPlant(time_step=0.0))
-    arm = make_parser(controller_plant).AddModels(model_file("arm.sdf"))[0]
+    arm = make_parser(controller_plant).AddModels(model_file(world.arm_model.file))[0]
     controller_plant.WeldFrames(controller_plant.world_frame(),
-                                controller_plant.GetFrameByName("arm_base", arm), X_W_ARM)
+                                controller_plant.GetFrameByName(world.arm_model.base_frame, arm), X_W_ARM)
     controller_plant.Finalize()
     # The arm instance's actuation input is ordered by actuator, the inverse dynamics' output by
     # generalized velocity; the same model file gives both one actuator per joint in one order.
@@ -327,7 +339,7 @@ def _add_touch_motion(builder, world: _World, scenario: Scenario, babble):
     if not tm.enabled:
         return babble
     postures = touch_postures(world.plant, world.tool_body, tm, X_W_TABLE.translation()[2],
-                              world.posture)
+                              world.posture, world.joints)
     descent = tm.approach_height + tm.press_depth
     touch = builder.AddSystem(TouchMotion(
         postures, descend_duration=descent / tm.descend_speed, keep_touching=tm.keep_touching,
@@ -394,8 +406,9 @@ def _add_distractor(builder, world: _World, scenario: Scenario) -> None:
 
 def _add_proprioception(builder, world: _World) -> None:
     """The joint encoders: arm positions and velocities, head positions."""
-    for name, joints, velocities in (("joint_positions", ARM_JOINTS, False),
-                                     ("joint_velocities", ARM_JOINTS, True),
+    arm_joints = world.arm_model.joints
+    for name, joints, velocities in (("joint_positions", arm_joints, False),
+                                     ("joint_velocities", arm_joints, True),
                                      ("head_joint_positions", HEAD_JOINTS, False)):
         gain = builder.AddSystem(MatrixGain(_selector(world.plant, joints, velocities)))
         gain.set_name(name)
@@ -439,7 +452,7 @@ def _add_ground_truth(builder, world: _World, camera_body, X_BC) -> GroundTruth:
     """Hand pose and the evaluation-only ground truth (camera pose, tool point and pose in the
     hand, masses)."""
     plant = world.plant
-    wrist_roll = plant.GetJointByName(ARM_JOINTS[-1])
+    wrist_roll = world.joints[-1]
     outboard = [b for b in plant.GetBodiesKinematicallyAffectedBy([wrist_roll.index()])
                 if b != wrist_roll.child_body().index()]
     tracked = (plant.GetFrameByName("tracked_point", world.tool) if world.tool is not None

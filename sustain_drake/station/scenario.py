@@ -30,9 +30,10 @@ from pydrake.systems.sensors import CameraConfig
 from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.loops.hand_eye import HandEyeConfig
 from sustain_drake.loops.payload import KinestheticConfig
-from sustain_drake.station.models import TOOL_FILES
+from sustain_drake.station.models import ARMS, TOOL_FILES, ArmModel
 
-ARM_JOINTS = ("arm_joint1", "arm_joint2", "arm_joint3", "arm_joint4", "arm_joint5")
+# The first arm's joints (models/arm.sdf); a scenario's own arm: ``arm_of(scenario).joints``.
+ARM_JOINTS = ARMS["arm"].joints
 HEAD_JOINTS = ("head_pan", "head_tilt")
 TOOL_MODELS = (*TOOL_FILES, "none")
 
@@ -60,6 +61,15 @@ def _default_camera() -> CameraConfig:
     camera.X_PB = Transform()
     camera.X_PB.base_frame = "head::camera_mount"
     return camera
+
+
+@dataclasses.dataclass
+class ArmConfig:
+    """The robot arm on the table's pedestal (``station.models.ARMS``), holding the tool in the same
+    gripper whichever it is."""
+
+    # the arm: "arm" (5 joints, models/arm.sdf) or "ur_arm" (6 joints, UR5e-like, models/ur_arm.sdf)
+    model: str = "arm"
 
 
 @dataclasses.dataclass
@@ -95,11 +105,13 @@ class MotionConfig:
     """The babbling motion generator (smooth random joint-space moves within ranges)."""
 
     seed: int = 0  # seed of the random moves (any integer >= 0)
-    # rad: [lower, upper] per arm joint, clipped to the model's joint limits
+    # rad: [lower, upper] per arm joint, clipped to the model's joint limits; left at this default
+    # (the 5-joint arm's), another arm babbles within its own (station.models.ARMS)
     joint_ranges: list[list[float]] = field(default_factory=lambda: [
-        [-0.8, 0.8], [0.2, 1.0], [0.6, 1.6], [-0.4, 1.2], [-1.5, 1.5]])
-    # rad: the arm's joint angles at the start
-    initial_posture: list[float] = field(default_factory=lambda: [0.0, 0.6, 1.1, 0.5, 0.0])
+        list(r) for r in ARMS["arm"].joint_ranges])
+    # rad: the arm's joint angles at the start; left at this default (the 5-joint arm's), another arm
+    # starts at its own (station.models.ARMS)
+    initial_posture: list[float] = field(default_factory=lambda: list(ARMS["arm"].initial_posture))
     max_speed: float = 0.6  # rad/s: peak joint speed of a move (the pace)
     min_duration: float = 1.0  # s: the shortest move
     dwell: float = 0.0  # s of rest after each move (quasi-static identification)
@@ -247,6 +259,7 @@ class Scenario:
     duration: float = 10.0  # s: default length of a simulate run
     # the plant: 2 ms discrete (SAP) steps, stable with implicit PD actuators (time_step from 10 us to 10 ms)
     plant_config: MultibodyPlantConfig = field(default_factory=_default_plant_config)
+    arm: ArmConfig = field(default_factory=ArmConfig)  # the robot arm: "arm" (5 joints) or "ur_arm" (6)
     # the head's RGB-D camera: 30 fps, color, depth and label images, 0.1-5 m depth range (at most
     # 4096 px a side and 240 fps)
     camera: CameraConfig = field(default_factory=_default_camera)
@@ -373,8 +386,33 @@ def load_scenario_string(data: str, name: str = "<string>") -> Scenario:
 
 
 def scenario_text(scenario: Scenario) -> str:
-    """The scenario as YAML, every key written out (what a run actually used)."""
-    return yaml_dump_typed(scenario)
+    """The scenario as YAML, every key written out (what a run actually used: the arm's own motion
+    defaults filled in, see ``arm_motion``)."""
+    return yaml_dump_typed(dataclasses.replace(scenario, motion=arm_motion(scenario)))
+
+
+def arm_of(scenario: Scenario) -> ArmModel:
+    """The scenario's arm (``arm.model``) in ``station.models.ARMS``."""
+    try:
+        return ARMS[scenario.arm.model]
+    except (KeyError, TypeError):
+        raise ScenarioError(f"arm.model must be one of {', '.join(ARMS)}, "
+                            f"got {scenario.arm.model!r}") from None
+
+
+def arm_motion(scenario: Scenario) -> MotionConfig:
+    """The motion section the arm babbles with: ``joint_ranges`` and ``initial_posture`` left at their
+    defaults (the 5-joint arm's) take the scenario's arm's own (``ArmModel``); the section itself for
+    the 5-joint arm or where both are set."""
+    arm, first, motion = arm_of(scenario), ARMS["arm"], scenario.motion
+    if arm is first:
+        return motion
+    changes = {}
+    if motion.joint_ranges == [list(r) for r in first.joint_ranges]:
+        changes["joint_ranges"] = [list(r) for r in arm.joint_ranges]
+    if motion.initial_posture == list(first.initial_posture):
+        changes["initial_posture"] = list(arm.initial_posture)
+    return dataclasses.replace(motion, **changes) if changes else motion
 
 
 # A seed delays the distractor's start by up to this (s), so seeds differ in its phase too.

@@ -7,7 +7,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import RigidBody
 from scipy.optimize import least_squares
 
-from sustain_drake.station.scenario import ARM_JOINTS, ScenarioError, TouchMotionConfig, TouchTarget
+from sustain_drake.station.scenario import ScenarioError, TouchMotionConfig, TouchTarget
 from sustain_drake.systems.touch_motion import TouchPosture
 
 # A posture is accepted when the point is within 0.5 mm and the direction within ~0.1 deg.
@@ -16,13 +16,13 @@ _SEEDS = 12
 
 
 class _Kinematics:
-    """Forward kinematics of the tool body over the 5 arm joints (other joints at default)."""
+    """Forward kinematics of the tool body over the arm's joints (other joints at default)."""
 
-    def __init__(self, plant: MultibodyPlant, tool_body: RigidBody):
+    def __init__(self, plant: MultibodyPlant, tool_body: RigidBody, joints):
         self.plant = plant
         self.context = plant.CreateDefaultContext()
         self.tool = tool_body
-        self.joints = [plant.GetJointByName(j) for j in ARM_JOINTS]
+        self.joints = list(joints)
         self.lower = np.array([j.position_lower_limits()[0] for j in self.joints])
         self.upper = np.array([j.position_upper_limits()[0] for j in self.joints])
 
@@ -35,9 +35,9 @@ class _Kinematics:
 def solve_touch_posture(kin: _Kinematics, target: TouchTarget, p_WQ: np.ndarray, q_hint: np.ndarray,
                         seed: int, near_hint: bool = True) -> np.ndarray | None:  # fmt: skip
     """Joint angles putting the tool's point ``target.p_TQ`` at ``p_WQ`` with ``down_T`` along
-    world -z (3 + 2 equations, 5 joints) from several least-squares starts: the solution nearest
-    ``q_hint`` (``near_hint``) or the one farthest from the joint limits; None when no start
-    reaches it within the joint limits."""
+    world -z (3 + 2 equations, one unknown per arm joint) from several least-squares starts: the
+    solution nearest ``q_hint`` (``near_hint``) or the one farthest from the joint limits; None
+    when no start reaches it within the joint limits."""
     p_TQ = np.asarray(target.p_TQ, dtype=float)
     d_T = np.asarray(target.down_T, dtype=float) / np.linalg.norm(target.down_T)
     down_W = np.array([0.0, 0.0, -1.0])
@@ -66,9 +66,10 @@ def solve_touch_posture(kin: _Kinematics, target: TouchTarget, p_WQ: np.ndarray,
 
 
 def touch_postures(plant: MultibodyPlant, tool_body: RigidBody, config: TouchMotionConfig,
-                   table_height: float, q_initial) -> list[TouchPosture]:  # fmt: skip
-    """``q_above`` / ``q_press`` for each target; an unreachable target is a ``ScenarioError``."""
-    kin = _Kinematics(plant, tool_body)
+                   table_height: float, q_initial, joints) -> list[TouchPosture]:  # fmt: skip
+    """``q_above`` / ``q_press`` for each target over the arm's ``joints`` (base to hand); an
+    unreachable target is a ``ScenarioError``."""
+    kin = _Kinematics(plant, tool_body, joints)
     postures = []
     q_hint = np.asarray(q_initial, dtype=float)
     for i, target in enumerate(config.targets):

@@ -20,8 +20,8 @@ from sustain_drake.loops.identify_observe import CoordinationConfig
 from sustain_drake.loops.payload import KinestheticConfig, QuasiStaticConfig
 from sustain_drake.perception.camera_motion import CameraMotionParams
 from sustain_drake.perception.point_refinement import RefinementParams
+from sustain_drake.station.models import ARMS
 from sustain_drake.station.scenario import (
-    ARM_JOINTS,
     TOOL_MODELS,
     DepthNoiseConfig,
     DistractorConfig,
@@ -36,6 +36,7 @@ from sustain_drake.station.scenario import (
     TouchMotionConfig,
     TouchTarget,
     WrenchSensorConfig,
+    arm_motion,
     one_line,
 )
 from sustain_drake.station.scenario_yaml import schema_fields, shown
@@ -332,6 +333,8 @@ def validate_scenario(s: Scenario, *, experiments: bool = False) -> None:
 
 
 def _validate(s: Scenario) -> None:
+    _check(isinstance(s.arm.model, str) and s.arm.model in ARMS,
+           f"arm.model must be one of {', '.join(ARMS)}, got {shown(s.arm.model)}")
     _check(s.tool.model in TOOL_MODELS, f"tool.model must be one of {', '.join(TOOL_MODELS)}, "
            f"got {shown(s.tool.model)}")
     for key, accepted in PLANT_STRINGS.items():
@@ -343,12 +346,12 @@ def _validate(s: Scenario) -> None:
     _check_numbers(s, "")
     _check_lights(s.lights)
 
-    m = s.motion
-    _check(len(m.joint_ranges) == len(ARM_JOINTS)
-           and all(len(r) == 2 and r[0] <= r[1] for r in m.joint_ranges),
-           f"motion.joint_ranges needs {len(ARM_JOINTS)} [lower, upper] pairs with lower <= upper")
-    _check(len(m.initial_posture) == len(ARM_JOINTS),
-           f"motion.initial_posture needs {len(ARM_JOINTS)} angles, got {len(m.initial_posture)}")
+    m, n = arm_motion(s), len(ARMS[s.arm.model].joints)
+    arm = f" (arm.model {s.arm.model} has {n} joints)" if s.arm.model != "arm" else ""
+    _check(len(m.joint_ranges) == n and all(len(r) == 2 and r[0] <= r[1] for r in m.joint_ranges),
+           f"motion.joint_ranges needs {n} [lower, upper] pairs with lower <= upper{arm}")
+    _check(len(m.initial_posture) == n,
+           f"motion.initial_posture needs {n} angles, got {len(m.initial_posture)}{arm}")
     _check(len(s.wrench_sensor.bias) == 6,
            "wrench_sensor.bias needs 6 numbers [tau_x, tau_y, tau_z, f_x, f_y, f_z]")
     p = s.distractor

@@ -66,6 +66,7 @@ class CandidateBank:
         poses: recent hand poses ``(time, X_WH)``.
         adoptions: every leader chosen, in order.
         round_start: when the first candidate since the last reset was admitted (NaN: none yet).
+        first_found: when the first candidate of the run was admitted (never reset; NaN: none yet).
     """
 
     candidates: tuple = ()
@@ -79,6 +80,7 @@ class CandidateBank:
     poses: tuple = ()
     adoptions: tuple = ()
     round_start: float = math.nan
+    first_found: float = math.nan
     observed_last: tuple | None = None  # (p_CP, X_WH) of the observed feature's last frame
     observed_p_HP: np.ndarray | None = None  # the observed point in H when not the leader's own
     witness: int = -1  # a second observed feature (see ``observation.observe_primary``), -1: none

@@ -44,6 +44,7 @@ def step(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCrit
     new_leader = leader != bank.leader
     bank = replace(bank, candidates=tuple(pool.kept), leader=leader, rejected=pool.rejected,
                    round_start=pool.round_start, sample_count=count, archive=tuple(pool.archive),
+                   first_found=pool.round_start if math.isnan(bank.first_found) else bank.first_found,
                    last_frame=float(frame_time), adoptions=pool.adoptions,
                    observed=bank.observed if leader == bank.leader else leader,
                    observed_last=bank.observed_last if leader == bank.leader else None,
