@@ -5,6 +5,7 @@ the tracker -> detector wiring that the body-detection experiment and the hand-e
 import dataclasses
 from dataclasses import dataclass, field
 
+from sustain_drake.loops.pixel_scale import pixel_scale, scaled
 from sustain_drake.perception.body_features import FeatureParams
 from sustain_drake.perception.coincidence import CoincidenceParams
 from sustain_drake.perception.optical_flow import TrackerParams
@@ -21,7 +22,9 @@ class BodyDetectionConfig:
 
     The detector's settings are those of ``CoincidenceParams`` (see
     ``sustain_drake.perception.coincidence`` for the rule; the defaults are its defaults,
-    except where a comment says otherwise); times in s, angles in rad, pixels in px.
+    except where a comment says otherwise); times in s, angles in rad, pixels in px of the measured
+    camera (640 x 480, 45 deg vertical field of view), scaled to the camera in use by its focal
+    length (``loops.pixel_scale``).
     """
 
     enabled: bool = False  # run the body-detection experiment on the scenario's world
@@ -71,9 +74,10 @@ class BodyDetectionConfig:
     # s: times the likelihood maps are saved as PNG (and at the end)
     snapshot_times: list[float] = field(default_factory=lambda: [10.0, 30.0])
 
-    def coincidence_params(self) -> CoincidenceParams:
-        """The detector's parameters (raises ``ValueError`` with one line on bad values)."""
-        return CoincidenceParams(
+    def coincidence_params(self, scale: float = 1.0) -> CoincidenceParams:
+        """The detector's parameters, pixel thresholds times ``scale`` (``loops.pixel_scale``; raises
+        ``ValueError`` with one line on bad values)."""
+        return scaled(CoincidenceParams(
             tau_a=self.tau_a, tau_s=self.tau_s, adot_threshold=self.adot_threshold,
             sdot_threshold=self.sdot_threshold, alpha=self.alpha, p_response=self.p_response,
             body_onset_rate=self.body_onset_rate, memory=self.memory,
@@ -81,15 +85,18 @@ class BodyDetectionConfig:
             confirm_timeout=self.confirm_timeout, request_interval=self.request_interval,
             single_joint_confirm=self.single_joint_confirm,
             max_sequence_trials=self.max_sequence_trials, stop_requests=self.stop_requests,
-            skip_busy_cells=self.skip_busy_cells)
+            skip_busy_cells=self.skip_busy_cells), scale, lengths=("sdot_threshold",))
 
-    def feature_params(self) -> FeatureParams:
-        return FeatureParams(hits=self.feature_hits, skip_known_cells=self.skip_feature_cells,
-                             flow_threshold_px=self.feature_flow_threshold_px)
+    def feature_params(self, scale: float = 1.0) -> FeatureParams:
+        return scaled(FeatureParams(hits=self.feature_hits, skip_known_cells=self.skip_feature_cells,
+                                    flow_threshold_px=self.feature_flow_threshold_px),
+                      scale, lengths=("flow_threshold_px",))
 
-    def tracker_params(self) -> TrackerParams:
-        return TrackerParams(max_corners=self.max_corners, min_distance_px=self.min_distance_px,
-                             quality_level=self.quality_level, predict_flow=self.predict_flow)
+    def tracker_params(self, scale: float = 1.0) -> TrackerParams:
+        return scaled(TrackerParams(max_corners=self.max_corners, min_distance_px=self.min_distance_px,
+                                    quality_level=self.quality_level, predict_flow=self.predict_flow),
+                      scale, lengths=("min_distance_px", "fb_threshold_px", "min_flow_px"),
+                      windows=("block_size", "lk_window_px"), odd_windows=("ncc_patch_px",))
 
 
 @dataclass
@@ -107,16 +114,17 @@ def add_body_detection(builder, info, num_joints: int, fps: float,
     connected to the detector. The tracker runs a quarter frame after the camera samples and the
     detector half a frame after, so the detector sees this frame's flow with the encoders half a frame
     later: the visual response lags the actuator by the physics only, not by two frames of pipeline.
+    Pixel settings are scaled to the camera (``loops.pixel_scale``).
     Left for the caller: the tracker's images and the detector's ``actuator_positions``. Raises
     ``ValueError`` (one line) on bad settings."""
-    period = 1.0 / fps
+    period, scale = 1.0 / fps, pixel_scale(info)
     tracker = builder.AddSystem(OpticalFlowTracker(
         info, (config.grid_rows, config.grid_cols), period=period, offset=0.25 * period,
-        params=config.tracker_params()))  # fmt: skip
+        params=config.tracker_params(scale)))  # fmt: skip
     tracker.set_name("optical_flow_tracker")
     detector = builder.AddSystem(MotionCoincidenceDetector(
         num_joints, tracker.grid.num_cells, period=period, offset=0.5 * period,
-        params=config.coincidence_params(), feature_params=config.feature_params()))  # fmt: skip
+        params=config.coincidence_params(scale), feature_params=config.feature_params(scale)))  # fmt: skip
     detector.set_name("motion_coincidence_detector")
     for name in ("visual_change", "tracked_features"):
         builder.Connect(tracker.GetOutputPort(name), detector.GetInputPort(name))

@@ -5,7 +5,6 @@ motion beyond the paper."""
 
 # No "from __future__ import annotations": yaml_load_typed needs the real field types.
 import dataclasses
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -13,6 +12,7 @@ import numpy as np
 from sustain_drake.identification.candidates import CandidateParams
 from sustain_drake.loops.body_detection import BodyDetectionConfig, add_body_detection
 from sustain_drake.loops.identify_observe import CoordinationConfig, connect_identify_observe
+from sustain_drake.loops.pixel_scale import RAD_PER_PX_MEASURED, pixel_scale, scaled
 from sustain_drake.perception.camera_motion import CameraMotionParams
 from sustain_drake.perception.point_refinement import RefinementParams
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
@@ -22,11 +22,6 @@ from sustain_drake.systems.identifying_motion import IdentifyingMotion
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation
-
-# rad per pixel of the camera the image thresholds were measured with (640 x 480, 45 deg vertical
-# field of view: f = 579.4 px). A threshold is an angle; at another camera it is that angle times
-# the camera's focal length in px, so it means the same view of the scene at any resolution.
-RAD_PER_PX_MEASURED = math.tan(math.radians(22.5)) / 240.0
 
 
 @dataclasses.dataclass
@@ -192,7 +187,10 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     criteria, rule = hand_eye.coordination.criteria(), hand_eye.coordination.rule()
     # Copies with their values checked again: a scenario file or a user sets fields after construction.
     candidate_params = dataclasses.replace(hand_eye.candidates)
-    refinement = dataclasses.replace(hand_eye.refinement)
+    # The refiner's windows scaled to the camera (loops.pixel_scale).
+    refinement = scaled(dataclasses.replace(hand_eye.refinement), pixel_scale(info),
+                        lengths=("max_shift_px",), windows=("corner_window_px", "depth_window_px",
+                                                            "blob_window_px", "symmetry_window_px"))
     body = add_body_detection(builder, info, num_joints, fps, perception)
     tracker, detector, period = body.tracker, body.detector, 1.0 / fps
     formulation = EyeToHandFormulation(criteria, hand_eye.coordination.forgetting_factor)
