@@ -1,5 +1,6 @@
-"""The package's layers point one way: math -> systems -> loops -> station -> experiments -> sweeps ->
-command line, with the shared helpers at the bottom. Checked on the import graph of the source itself."""
+"""The package's layers point one way: math -> systems -> loops -> station -> examples -> experiments ->
+sweeps -> command line, with the shared helpers at the bottom. Checked on the import graph of the
+source itself."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ LAYERS = (
     ("systems", ("sustain_drake.systems", "sustain_drake.calibration_export")),
     ("loops", ("sustain_drake.loops",)),
     ("station", ("sustain_drake.station",)),
+    ("examples", ("sustain_drake.examples",)),
     ("experiments", ("sustain_drake.experiments",)),
     ("sweeps", ("sustain_drake.sweeps",)),
     ("command line", ("sustain_drake.cli",)),

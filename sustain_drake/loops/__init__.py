@@ -13,10 +13,10 @@ arguments of ``make_sustainable_coordination``; each field's comment is its docu
 """
 
 from sustain_drake.loops.body_detection import BodyDetectionConfig
-from sustain_drake.loops.coordination import make_sustainable_coordination
+from sustain_drake.loops.coordination import camera_intrinsics, make_sustainable_coordination
 from sustain_drake.loops.hand_eye import HandEyeConfig
 from sustain_drake.loops.identify_observe import CoordinationConfig
 from sustain_drake.loops.payload import KinestheticConfig
 
 __all__ = ["BodyDetectionConfig", "CoordinationConfig", "HandEyeConfig", "KinestheticConfig",
-           "make_sustainable_coordination"]
+           "camera_intrinsics", "make_sustainable_coordination"]

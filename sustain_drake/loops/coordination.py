@@ -8,6 +8,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.sensors import CameraConfig, CameraInfo
 
 from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.loops.hand_eye import HandEyeConfig, add_hand_eye_loop
@@ -66,6 +67,20 @@ class AdoptedEstimates(LeafSystem):
         output.SetFromVector(np.zeros(3) if solution is None else solution.p_KCm)
 
 
+def camera_intrinsics(camera, argument: str = "camera_info") -> CameraInfo:
+    """The intrinsics of ``camera``: a ``pydrake.systems.sensors.CameraInfo`` as it is, or those of
+    a ``CameraConfig``'s colour camera (its width, height, focal lengths and principal point, as
+    ``CameraConfig.MakeCameras`` makes them; the config's ``fps`` is not read). Any other type raises
+    a one-line ``TypeError`` naming ``argument``."""
+    if isinstance(camera, CameraInfo):
+        return camera
+    if isinstance(camera, CameraConfig):
+        color_camera, _ = camera.MakeCameras()
+        return color_camera.core().intrinsics()
+    raise TypeError(f"{argument} must be a pydrake.systems.sensors.CameraInfo or CameraConfig, got "
+                    f"{type(camera).__name__}")
+
+
 def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 30.0,
                                   hand_eye: HandEyeConfig | None = None,
                                   body_detection: BodyDetectionConfig | None = None,
@@ -75,12 +90,14 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
                                   joint_ranges=None, motion_seed: int = 0,
                                   ) -> Diagram:  # fmt: skip
     """The sustainable coordination of an arm with ``num_joints`` joints, a depth camera with
-    intrinsics ``camera_info`` (``pydrake.systems.sensors.CameraInfo``) at ``fps`` frames per
-    second, and a wrist force/torque sensor. Settings are the scenario sections' dataclasses
-    (defaults if None). With ``plant`` (a finalized MultibodyPlant of the arm) and ``hand_frame``
-    the hand pose (and the sensor pose, at ``sensor_frame``, else the hand's) is computed from the
-    joint positions (``HandPoseFromPlant``); else it is the ``X_WH`` input and the sensor frame K is
-    the hand frame H. ``held_shape`` (the held object's ``pydrake.geometry`` shape at ``X_KG`` in K)
+    intrinsics ``camera_info`` (a ``pydrake.systems.sensors.CameraInfo``, or a ``CameraConfig`` whose
+    intrinsics are taken, ``camera_intrinsics``; any other type raises ``TypeError``) at ``fps``
+    frames per second (not read from a ``CameraConfig``), and a wrist force/torque sensor. Settings
+    are the scenario sections' dataclasses (defaults if None). With ``plant`` (a finalized
+    MultibodyPlant of the arm) and ``hand_frame`` the hand pose (and the sensor pose, at
+    ``sensor_frame``, else the hand's) is computed from the joint positions
+    (``HandPoseFromPlant``); else it is the ``X_WH`` input and the sensor frame K is the hand frame
+    H. ``held_shape`` (the held object's ``pydrake.geometry`` shape at ``X_KG`` in K)
     adds the touch estimator. ``joint_ranges`` (n x [lower, upper], rad) are the postures the
     identifying motion may ask for (needed with ``hand_eye.identifying_motion_interval`` > 0, the
     default; with a plant and no ranges, its position limits narrowed by ``RANGE_MARGIN``; its
@@ -129,12 +146,40 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
     ``camera_motion`` (2, ``[moving, moves]``: the camera noticed its own motion from the static
     scene, ``CameraMotionDetector``; each new move is a hand-eye change detection);
     the touch estimator's ``touch``, ``p_WP``, ``f_env_W``; for the user's motion generator
-    ``motion_confirm`` (the detector's confirming-motion request, paper §3.3, and with
-    ``hand_eye.identifying_motion_interval`` the identifying motion's far postures) and
-    ``hand_eye_pause`` and ``payload_pause`` (2 each, ``[request_id, seconds]``: each state
-    machine asks the motion to stop after a convergence; a new id is a new request); ``X_WH_used``
+    ``motion_confirm``, ``hand_eye_pause`` and ``payload_pause`` (below); ``X_WH_used``
     and ``X_WK_used`` (the hand and sensor poses the loops use).
+
+    Which outputs mean something when: ``X_WC`` is the identity and ``p_HP`` zeros until the first
+    hand-eye convergence (a ``converged`` event, ``hand_eye_mode`` 1); from then on they are the
+    adopted camera and tool point. A camera move (a ``change_detected`` event "the camera moved")
+    drops them (identity and zeros again until the next convergence); a failed observation (a
+    ``change_detected`` event "... samples over the limit": the tool slipped) keeps the last adopted
+    ones while ``hand_eye_mode`` is 0 and the loop identifies again: use them while
+    ``hand_eye_mode`` is 1. ``hand_eye_allowable_error`` is 0 until the first convergence, then the
+    last adoption's. ``payload_mass`` and ``p_KCm`` are zeros until ``payload_mode`` first turns 1.
+
+    The motion interface (``systems.motion_generator.MotionGenerator`` answers it;
+    docs/on_your_robot.md). Each request is edge-triggered by its ``request_id``: it is new when the
+    id differs from the last one seen; the ids start at 0, which is no request, so hold the last id
+    seen and never act on an unchanged one. ``motion_confirm`` and ``hand_eye_pause`` change at
+    most once per camera frame (1 / ``fps``), ``payload_pause`` once per ``kinesthetic.period``.
+
+    - ``motion_confirm`` (``2 + num_joints``: ``[request_id, joint, q_1..q_n]``, ``q`` in rad): stop
+      smoothly, go to the posture ``q``, rest there still (``MotionGenerator``: ``confirm_hold``,
+      0.5 s), then move again: only joint ``joint``
+      (0-based) when ``joint >= 0``, a usual move when ``joint < 0``. The body detector's
+      confirming request (paper §3.3: ``q`` is the posture at the onset of the move that coincided
+      with candidate pixels' motion; the trial is the first move starting within
+      ``body_detection.posture_tolerance``, 0.05 rad max-norm, of ``q`` after the whole arm rested
+      0.1 s; unanswered for ``body_detection.confirm_timeout``, 5 s, it expires) and, while the
+      hand-eye loop identifies, the identifying motion's far postures (drawn within
+      ``joint_ranges``; ``joint`` -1). A new request replaces one not yet answered. Clip ``q`` to
+      your arm's safe ranges.
+    - ``hand_eye_pause``, ``payload_pause`` (2 each, ``[request_id, seconds]``): the state machine
+      converged; brake smoothly, hold still for ``seconds`` (``coordination.pause_after_convergence``,
+      3 s by default), then carry on.
     """
+    camera_info = camera_intrinsics(camera_info)
     hand_eye = hand_eye or HandEyeConfig()
     body_detection = body_detection or BodyDetectionConfig()
     kinesthetic = kinesthetic or KinestheticConfig()

@@ -30,6 +30,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import AffineSystem, MatrixGain, SharedPointerSystem
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
+from sustain_drake.loops.coordination import camera_intrinsics
 from sustain_drake.station.models import TOOL_FILES, ArmModel, make_parser, model_file
 from sustain_drake.station.scenario import (
     HEAD_JOINTS,
@@ -185,8 +186,7 @@ def sensor_pose_in_hand(station) -> RigidTransform:
 def camera_info(scenario: Scenario) -> CameraInfo:
     """The intrinsics of the scenario's camera (image size, focal lengths, principal point),
     e.g. for the optical-flow tracker's constructor."""
-    color_camera, _ = scenario.camera.MakeCameras()
-    return color_camera.core().intrinsics()
+    return camera_intrinsics(scenario.camera, "scenario.camera")
 
 
 def _deterministic(transform, name: str) -> RigidTransform:
