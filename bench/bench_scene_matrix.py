@@ -21,16 +21,18 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import pandas as pd  # noqa: E402
 from bench_hand_eye import _fmt  # noqa: E402
 from common import bench_main, failed, metrics_of  # noqa: E402
 from make_scene_matrix import design, second_arm_design  # noqa: E402
+
+from sustain_drake.sweeps import every_target_met  # noqa: E402
 
 SPLITS = ("tuning", "held_out")
 
 
 def _met_all(row) -> bool:
-    columns = [k for k in row.index if k.startswith("target.hand_eye.") and k.endswith(".met")]
-    return bool(columns) and all(row[k] is True or row[k] == 1 for k in columns)
+    return bool(every_target_met(pd.DataFrame([row])).iloc[0])
 
 
 def _scene(c: dict) -> str:
@@ -78,8 +80,11 @@ def main(argv=None) -> int:
     cells = (design() if args.arm == "first" else second_arm_design())[args.split]
 
     def every_target(table) -> list[str]:
-        met = sum(_met_all(r) for _, r in table.iterrows())
-        return [f"- every hand-eye target: met on {met} of {len(table)} cells ({args.split} set)"]
+        met = int(every_target_met(table).sum()) if not table.empty else 0
+        converged = sum(bool(metrics_of(r, "hand_eye").get("adopted")) for _, r in table.iterrows())
+        return [f"- every hand-eye target: met on {met} of {len(table)} cells ({args.split} set); "
+                f"a camera adopted on {converged}, an honest 'not converged' (none adopted) on "
+                f"{len(table) - converged}"]
 
     return bench_main(rest, __doc__, f"{name}_{args.split}.yaml", "hand_eye", COLUMNS,
                       row_maker(cells), extra=every_target, block=f"bench_{name}_{args.split}")

@@ -12,7 +12,7 @@ import pandas as pd
 from results_page import publish  # bench/results_page.py
 
 from sustain_drake.experiments.targets import TARGETS
-from sustain_drake.sweeps import Sweep, load_sweep, open_client, run_sweep, write_summary
+from sustain_drake.sweeps import Sweep, load_sweep, open_client, read_table, run_sweep, write_summary
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,6 +30,8 @@ def sweep_arguments(description: str, sweep: str, out: str) -> argparse.Argument
     p.add_argument("--out", type=Path, default=ROOT / "out" / out,
                    help="the sweep's output folder; a re-run skips the cells already there")
     p.add_argument("--results", action="store_true", help="also write the table on docs/results.md")
+    p.add_argument("--report", action="store_true", help="run nothing: report the cells already in "
+                   "--out (with --results, published as a partial table saying how many ran)")
     p.set_defaults(default_sweep=ROOT / "diagrams" / "sweeps" / sweep)
     return p
 
@@ -41,6 +43,11 @@ def run_bench(args) -> pd.DataFrame:
         raise SystemExit("--results publishes the default sweep's whole cells only (no --cells, "
                          "--duration or --sweep)")
     sweep = select_cells(load_sweep(args.sweep), args.cells, args.duration)
+    if args.report:
+        table = read_table(args.out)
+        if table.empty:
+            raise SystemExit(f"{args.out} holds no results of {args.sweep.name} yet")
+        return table[table["cell_id"].isin({c.id for c in sweep.cells})].sort_values("cell")
     with open_client(args.workers, args.scheduler) as client:
         table = run_sweep(sweep, args.out, client)
     write_summary(table, sweep, args.out)
@@ -102,6 +109,9 @@ def bench_main(argv, doc: str, sweep: str, experiment: str, columns: list[str], 
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += [row_text(row) for _, row in table.iterrows()]
     lines += target_lines(table, experiment) + extra(table)
+    total = len(select_cells(load_sweep(args.sweep), args.cells, args.duration).cells)
+    if len(table) < total:
+        lines.append(f"- {len(table)} of the sweep's {total} cells have run (the rest: not yet)")
     print("\n".join(lines))
     if args.results:
         publish(block, lines)
