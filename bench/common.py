@@ -109,6 +109,8 @@ def bench_main(argv, doc: str, sweep: str, experiment: str, columns: list[str], 
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += [row_text(row) for _, row in table.iterrows()]
     lines += target_lines(table, experiment) + extra(table)
+    if "commit" in table and not table.empty:
+        lines.append("- cells run at commit(s): " + ", ".join(f"`{c}`" for c in sorted(set(table["commit"]))))
     total = len(select_cells(load_sweep(args.sweep), args.cells, args.duration).cells)
     if len(table) < total:
         lines.append(f"- {len(table)} of the sweep's {total} cells have run (the rest: not yet)")

@@ -29,6 +29,7 @@ from sustain_drake.identification import (
     batch,
     coordination,
     eye_to_hand,
+    observability,
     payload,
     rotation,
     sustainable_identifier,
@@ -59,6 +60,11 @@ def _filled_eye() -> EyeToHandIdentifier:
 
 EYE = _filled_eye()
 S16, WEIGHT = EYE.core.S, EYE.core.weight
+_PAYLOAD = PayloadIdentifier()
+for _q in Rotation.random(12, random_state=np.random.default_rng(6)).as_matrix():
+    _f = _q.T @ [0.0, 0.0, 5.0]
+    _PAYLOAD.add(np.concatenate([np.cross([0.0, 0.0, 0.1], _f), _f]), _q)
+S5, WEIGHT5, X5 = _PAYLOAD.core.S, _PAYLOAD.core.weight, _PAYLOAD.solve().x
 ESTIMATE = EYE.solve().estimate
 STATE = EYE.state
 CORE = SustainableIdentifier(4)
@@ -128,6 +134,9 @@ TARGETS = {
     "touch.predicted_wrench": (touch.predicted_wrench, (0.5, P, R, G)),
     "touch.line_of_action": (touch.line_of_action, (P, P2)),
     "touch.locate_touch": (touch.locate_touch, (WRENCH, touch.Sphere(0.1), X)),
+    "observability.eye_to_hand_standard_errors": (observability.eye_to_hand_standard_errors, (S16, R, 1e-6)),
+    "observability.eye_to_hand_covariance": (observability.eye_to_hand_covariance, (S16, R)),
+    "observability.payload_covariance": (observability.payload_covariance, (S5, WEIGHT5, X5, G)),
     "coordination.CoordinationRule": (coordination.CoordinationRule, (100.0, 10, 3.0, 0.0, False)),
     "coordination.allowable_error": (coordination.allowable_error, (RULE, 1e-6)),
     "coordination.initial_state": (coordination.initial_state, ()),
@@ -151,7 +160,8 @@ def test_every_valid_call_works():
 
 
 def test_every_public_function_and_class_is_a_target():
-    for module in (sustainable_identifier, eye_to_hand, payload, batch, rotation, touch, coordination):
+    for module in (sustainable_identifier, eye_to_hand, payload, batch, rotation, touch, coordination,
+                   observability):
         for attr, value in vars(module).items():
             if attr.startswith("_") or getattr(value, "__module__", None) != module.__name__:
                 continue
@@ -258,6 +268,11 @@ BAD_CALLS = [
     _bad("eye_to_hand.rotation_levers", 2, "p", "p_WC"),
     _bad("eye_to_hand.position_given_rotation", 2, NAN3, "R_WC"),
     _bad("eye_to_hand.camera_given_points", 1, [[1.0, 2.0]], "p_HP"),
+    _bad("observability.eye_to_hand_standard_errors", 1, REFLECTION, "R"),
+    _bad("observability.eye_to_hand_standard_errors", 2, np.nan, "sigma2"),
+    _bad("observability.eye_to_hand_covariance", 0, S16[:15], "S"),
+    _bad("observability.payload_covariance", 1, "n", "weight"),
+    _bad("observability.payload_covariance", 2, np.ones(4), "x"),
     _bad("eye_to_hand.spread_off_line", 0, NAN3, "covariance"),
     _bad("eye_to_hand.camera_after_turn", 0, None, "R_WC0"),
     _bad("eye_to_hand.camera_after_turn", 2, ZERO_ROW, "b0"),

@@ -140,13 +140,17 @@ def print_eye_to_hand(result, points, poses, stream) -> None:
     n = len(result.residuals)
     w(f"Eye-to-hand calibration (paper §3.4) of {n} samples\n  points: {points}\n  poses:  {poses}\n")
     w(f"verdict: {result.verdict}\n")
-    if result.refined is None:
-        return
+    if result.refined is None or not result.converged:
+        return  # never a camera (nor residuals under one) from data the verdict refuses
     X = result.X_WC
     w("camera pose in the world, X_WC:\n")
     w("  translation [m]:  " + "  ".join(f"{v:+.6f}" for v in X[:3, 3]) + "\n")
     w("  rpy [deg]:        " + "  ".join(f"{v:+.4f}" for v in rpy_degrees(X[:3, :3])) + "\n")
     w("point in the hand, p_HP [m]: " + "  ".join(f"{v:+.6f}" for v in result.p_HP) + "\n")
+    if result.standard_errors is not None:
+        rotation, position, point = result.standard_errors
+        w(f"1 sd (Gauss-Newton's covariance, RMS of the 3-D error): camera position {position * 1e3:.3f} mm, "
+          f"camera rotation {math.degrees(rotation):.4f} deg, p_HP {point * 1e3:.3f} mm\n")
     proj = result.projected
     dp = np.linalg.norm(proj.p_WC - X[:3, 3]) * 1e3
     w(

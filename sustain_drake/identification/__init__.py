@@ -5,6 +5,8 @@
 - ``eye_to_hand``: the one-point eye-to-hand formulation (N = 16), conditioning, refinement.
 - ``payload``: the static payload formulation (N = 5) and the wrench sign convention.
 - ``batch``: ``calibrate_eye_to_hand`` and ``identify_payload`` for recorded data.
+- ``observability``: the checks that make a verdict honest on degenerate or mis-scaled data (what
+  the motion determines, units and frames, agreement, uncertainty), their reasons, and covariances.
 - ``errors``: ``IdentificationError`` (a ``ValueError``), the only exception the API raises for a
   bad argument (wrong type, shape or value; one-line message naming it), and its checks.
 """

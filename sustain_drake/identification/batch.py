@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sustain_drake.identification import eye_to_hand, payload
+from sustain_drake.identification import eye_to_hand, observability, payload
 from sustain_drake.identification.errors import (
     ROTATION_TOLERANCE,
     VECTOR3,
@@ -82,6 +82,10 @@ class EyeToHandResult:
         verdict: converged or not, with the reason.
         projected: the TLS estimate projected onto SO(3) (``eye_to_hand.EyeToHandEstimate``).
         refined: its Gauss-Newton refinement (what ``X_WC`` and ``p_HP`` report).
+        covariance: Gauss-Newton's covariance (9 x 9) of the refined estimate in ``(omega, p_WC,
+            p_HP)``, ``omega`` the camera's turn in its own frame (rad; the truth is
+            ``R_WC exp([omega x])``), positions in m (``observability.eye_to_hand_covariance``);
+            None without a refined estimate or when it is undetermined.
     """
 
     X_WC: np.ndarray
@@ -95,10 +99,20 @@ class EyeToHandResult:
     verdict: Verdict
     projected: eye_to_hand.EyeToHandEstimate | None
     refined: eye_to_hand.EyeToHandEstimate | None
+    covariance: np.ndarray | None = None
 
     @property
     def converged(self) -> bool:
         return self.verdict.converged
+
+    @property
+    def standard_errors(self) -> tuple[float, float, float] | None:
+        """1 sd (the RMS of the 3-D error) of the camera rotation (rad), the camera position and
+        ``p_HP`` (m), from ``covariance``; None without it."""
+        if self.covariance is None:
+            return None
+        d = np.diagonal(self.covariance)
+        return tuple(math.sqrt(float(d[k:k + 3].sum())) for k in (0, 3, 6))
 
 
 def eye_to_hand_residuals(X_WC: np.ndarray, p_HP: np.ndarray, p_C: np.ndarray, X_WH: np.ndarray):
@@ -161,8 +175,11 @@ def calibrate_eye_to_hand(p_C, X_WH, criteria: ConvergenceCriteria | None = None
         p_HP = estimate.p_HP
         residuals = eye_to_hand_residuals(X_WC, p_HP, p_C, X_WH)
     rms = float(np.sqrt(np.mean(residuals**2))) if len(residuals) else math.inf
+    covariance = (None if solution.refined is None
+                  else observability.eye_to_hand_covariance(identifier.core.S, solution.refined.R_WC))
     return EyeToHandResult(X_WC=X_WC, p_HP=p_HP, residuals=residuals, rms=rms, ssd=solution.ssd,
-                           projected=solution.projected, refined=solution.refined, **_statistics(solution))
+                           projected=solution.projected, refined=solution.refined, covariance=covariance,
+                           **_statistics(solution))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -178,6 +195,8 @@ class PayloadResult:
         gap_ratio: ``lambda_4 / lambda_5``.
         expected_rms: ``sqrt(a^2 lambda_5)`` (m/s^2 and N m rows together).
         verdict: converged or not, with the reason.
+        covariance: the covariance (4 x 4) of ``(mass, p_KCm)`` in kg and m
+            (``observability.payload_covariance``); None without a positive mass.
     """
 
     mass: float
@@ -188,6 +207,7 @@ class PayloadResult:
     gap_ratio: float
     expected_rms: float
     verdict: Verdict
+    covariance: np.ndarray | None = None
 
     @property
     def converged(self) -> bool:
@@ -227,8 +247,10 @@ def identify_payload(
     f_W = np.einsum("nij,nj->ni", R_WK, f)
     force_res = np.linalg.norm(f_W + solution.mass * identifier.g_W, axis=1)
     torque_res = np.linalg.norm(tau - np.cross(solution.p_KCm, f), axis=1)
+    covariance = observability.payload_covariance(identifier.core.S, identifier.core.weight, solution.x,
+                                                  identifier.g_W)  # fmt: skip
     return PayloadResult(mass=solution.mass, p_KCm=solution.p_KCm, force_residuals=force_res,
-                         torque_residuals=torque_res, **_statistics(solution))
+                         torque_residuals=torque_res, covariance=covariance, **_statistics(solution))
 
 
 def _statistics(solution) -> dict:

@@ -52,7 +52,14 @@ from sustain_drake.identification.errors import (
     rotation,
     to_float_array,
 )
-from sustain_drake.identification.rotation import _nearest_rotation, _projection_parts, _skew, _so3_exp
+from sustain_drake.identification.observability import _judge_eye_to_hand
+from sustain_drake.identification.rotation import (
+    _nearest_rotation,
+    _projection_parts,
+    _rotation_jacobian,
+    _skew,
+    _so3_exp,
+)
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
     EigenSolution,
@@ -239,15 +246,7 @@ _T_FLAT = np.concatenate(
 )
 
 
-_SKEW_BASIS = [_skew(e) for e in np.eye(3)]
 _SMALL_STEP = 1e-6  # radians / metres
-
-
-def _jacobian(R: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """``d x / d (omega, dp_WC, dp_HP)`` at ``R`` for the right perturbation ``R exp([omega x])``."""
-    for k in range(3):
-        out[0:9, k] = (R @ _SKEW_BASIS[k]).ravel(order="F")
-    return out
 
 
 def refine(
@@ -310,7 +309,7 @@ def _gauss_newton(S: np.ndarray, weight: float, R: np.ndarray, p_WC: np.ndarray,
     J = np.zeros((N_UNKNOWNS, 9))
     J[9:15, 3:9] = np.eye(6)
     for _ in range(max_iterations):
-        _jacobian(R, J)
+        _rotation_jacobian(R, J)
         H = J.T @ S @ J
         g = J.T @ (S @ x)
         try:
@@ -488,10 +487,14 @@ class EyeToHandIdentifier(FormulationIdentifier):
         x = a * direction
         if a == 0.0 or not math.isfinite(sum(x.tolist())):
             verdict = Verdict(False, "the rotation block of v_N is zero: no rotation to identify")
+            verdict = _judge_eye_to_hand(self.criteria, core._S, core.weight, n, eigen, None, verdict)
             return EyeToHandSolution(eigen, 0.0, math.inf, math.inf, None, None, verdict, n)
         expected_mse = a * a * eigen.lambda_N
         projected = EyeToHandEstimate(R, x[9:12], x[12:15], x, expected_mse)
-        verdict = judge(self.criteria, n, eigen, math.sqrt(expected_mse), None, ssd, " m")
+        expected_rms = math.sqrt(expected_mse)
+        verdict = judge(self.criteria, n, eigen, expected_rms, None, ssd, " m")
+        verdict = _judge_eye_to_hand(self.criteria, core._S, core.weight, n, eigen, (x, R, expected_rms),
+                                    verdict)  # fmt: skip
         return EyeToHandSolution(eigen, a, ssd, expected_mse, projected, None, verdict, n)
 
     def _refine(self, solution: EyeToHandSolution) -> EyeToHandSolution:
@@ -564,7 +567,7 @@ def _joint_normal_equations(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.nd
     camera ``(R, p_WC)`` and the points ``p_HP`` (K x 3), in the unknowns ``(omega, dp_WC, dp_HP_1..K)``
     (``omega`` the camera's turn in its own frame)."""
     K = len(S_list)
-    J = _jacobian(R, np.zeros((N_UNKNOWNS, 9)))
+    J = _rotation_jacobian(R, np.zeros((N_UNKNOWNS, 9)))
     J[9:15, 3:9] = np.eye(6)
     n = 6 + 3 * K
     H, g = np.zeros((n, n)), np.zeros(n)

@@ -43,6 +43,7 @@ from sustain_drake.identification.errors import (
     out_array,
     real_array,
 )
+from sustain_drake.identification.observability import _judge_payload
 from sustain_drake.identification.rotation import _skew
 from sustain_drake.identification.sustainable_identifier import (
     ConvergenceCriteria,
@@ -235,4 +236,5 @@ class PayloadIdentifier(FormulationIdentifier):
             math.sqrt(expected_mse) if math.isfinite(expected_mse) else math.inf,
             problem,
         )
+        verdict = _judge_payload(self.criteria, core.S_view, core.weight, n, eigen, x, self.g_W, verdict)
         return PayloadSolution(eigen, mass, x[1:4].copy(), x, expected_mse, verdict, n)

@@ -7,6 +7,7 @@ of the wrong type, shape or value; the identifiers' own calls go to unchecked tw
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,12 +46,20 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 
 
 def _so3_exp(w: np.ndarray) -> np.ndarray:
-    theta = float(np.sqrt(w @ w))
-    K = _skew(w)
-    if theta < 1e-8:
-        # Second-order Taylor expansion; exact to round-off for such small angles.
-        return _E3 + K + 0.5 * K @ K
-    return _E3 + (np.sin(theta) / theta) * K + ((1.0 - np.cos(theta)) / theta**2) * K @ K
+    # R = E + sin(theta) K + (1 - cos(theta)) K^2 with K = [u x] for the unit axis u and K^2 = u u^T - E,
+    # in Python floats (a fifth of the cost of the numpy expression, which the refinements evaluate
+    # at every step); hypot keeps any finite w from overflowing.
+    x, y, z = w.tolist()
+    theta = math.hypot(x, y, z)
+    if theta < 1e-8:  # second-order Taylor expansion; exact to round-off for such small angles
+        a, b, t2 = 1.0, 0.5, x * x + y * y + z * z
+    else:
+        x, y, z = x / theta, y / theta, z / theta
+        a, b, t2 = math.sin(theta), 1.0 - math.cos(theta), 1.0
+    bxy, bxz, byz = b * x * y, b * x * z, b * y * z
+    return np.array([[1.0 + b * (x * x - t2), bxy - a * z, bxz + a * y],
+                     [bxy + a * z, 1.0 + b * (y * y - t2), byz - a * x],
+                     [bxz - a * y, byz + a * x, 1.0 + b * (z * z - t2)]])  # fmt: skip
 
 
 def rotation_angle(R: np.ndarray) -> float:
@@ -125,6 +134,21 @@ def _projection_parts(x9: np.ndarray) -> tuple[np.ndarray, float, float, float]:
     if ssq <= 0.0:
         return R, 0.0, float("inf"), sign
     return R, sign * ssum / ssq, max(3.0 - ssum * ssum / ssq, 0.0), sign
+
+
+def _rotation_jacobian(R: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``d vec(R exp([omega x])) / d omega`` at ``omega = 0`` (``vec`` stacks the columns), written
+    into ``out[0:9, 0:3]`` (the rotation block of the refinements' Jacobians): ``vec(R [e_k x])``,
+    i.e. the columns ``[0; r3; -r2]``, ``[-r3; 0; r1]``, ``[r2; -r1; 0]`` with ``r_j`` the columns of
+    ``R``."""
+    out[0:9, 0:3] = R.T.ravel()[_JACOBIAN_SOURCE] * _JACOBIAN_SIGN
+    return out
+
+
+# ``_rotation_jacobian``'s entries: an index into ``[r1; r2; r3]`` and a sign, per row and column.
+_JACOBIAN_SOURCE = np.array([[0, 6, 3], [0, 7, 4], [0, 8, 5], [6, 0, 0], [7, 0, 1], [8, 0, 2],
+                             [3, 0, 0], [4, 1, 0], [5, 2, 0]])  # fmt: skip
+_JACOBIAN_SIGN = np.array([[0.0, -1.0, 1.0]] * 3 + [[1.0, 0.0, -1.0]] * 3 + [[-1.0, 1.0, 0.0]] * 3)
 
 
 def nearest_rotation(M: np.ndarray) -> np.ndarray:
