@@ -23,7 +23,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from make_scene_matrix import SWEEPS  # noqa: E402
 
 from sustain_drake.experiments.run import simulate_scenario  # noqa: E402
-from sustain_drake.station.scenario import Scenario, load_scenario_string, validate_scenario  # noqa: E402
+from sustain_drake.station.scenario import (  # noqa: E402
+    Scenario,
+    ScenarioError,
+    load_scenario_string,
+    validate_scenario,
+)
 from sustain_drake.sweeps import load_sweep  # noqa: E402
 from sustain_drake.sweeps.spec import override_document  # noqa: E402
 
@@ -35,10 +40,16 @@ def _with_settings(scenario, settings: list[str]):
         key, sep, value = setting.partition("=")
         if not sep or not key:
             raise SystemExit(f"--set {setting!r}: expected KEY=VALUE")
-        values[key] = yaml.compose(value)
+        try:
+            values[key] = yaml.compose(value)
+        except yaml.YAMLError as e:
+            raise SystemExit(f"--set {setting!r}: not YAML ({str(e).splitlines()[0]})") from None
     if not values:
         return scenario
-    return yaml_load_typed(schema=Scenario, data=override_document(values), defaults=scenario)
+    try:
+        return yaml_load_typed(schema=Scenario, data=override_document(values), defaults=scenario)
+    except (RuntimeError, ValueError) as e:
+        raise SystemExit(f"--set: {str(e).splitlines()[0]}") from None
 
 
 def main(argv=None) -> int:
@@ -53,7 +64,10 @@ def main(argv=None) -> int:
         if not 0 <= index < len(sweep.cells):
             raise SystemExit(f"the tuning set has cells 0-{len(sweep.cells) - 1}, not {index}")
         scenario = _with_settings(load_scenario_string(sweep.cells[index].scenario_text), args.settings)
-        validate_scenario(scenario, experiments=True)
+        try:
+            validate_scenario(scenario, experiments=True)
+        except ScenarioError as e:
+            raise SystemExit(str(e)) from None
         out = args.out / f"cell{index}"
         simulate_scenario(scenario, out, duration=args.duration, replay=False)
         m = json.loads((out / "metrics.json").read_text())["hand_eye"]

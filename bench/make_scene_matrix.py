@@ -182,11 +182,11 @@ def sweep_text(split: str, cells: list[dict]) -> str:
         f"# The hand-eye scene matrix, {split.replace('_', '-')} set (issue 27): written by",
         "# bench/make_scene_matrix.py (its docstring: axes, values, split); do not edit by hand.",
         f"#   .venv/bin/python bench/bench_scene_matrix.py --split {split}",
-        "# Cells, by the names of their axis values:",
+        "# Cells, by the names of their axis values (each has its own motion seed, the seed axis):",
     ]
     for i, c in enumerate(cells):
         lines.append(f"#   {i:2d}: {c['placement']}, {c['camera']}, {c['tool']}, lights {c['lights']}, "
-                     f"person {c['person']}, disturbances {c['disturbances']}, seed {c['seed']}")
+                     f"person {c['person']}, disturbances {c['disturbances']}")
     lines += ["scenario: ../hand_eye.yaml", "scenario_name: hand_eye", f"duration: {DURATION}", "zip:"]
     for axis, values in columns.items():
         lines.append(f"  {axis}:")
@@ -225,8 +225,8 @@ def second_arm_sweep_text(split: str, cells: list[dict]) -> str:
     lines = [f"# The second arm's cells of the scene matrix, {split.replace('_', '-')} set (issue 27):",
              "# written by bench/make_scene_matrix.py; do not edit by hand.",
              f"#   .venv/bin/python bench/bench_scene_matrix.py --split {split} --arm second", "# Cells:"]
-    lines += [f"#   {i}: {c['tool']}, lights {c['lights']}, disturbances {c['disturbances']}, "
-              f"seed {c['seed']}" for i, c in enumerate(cells)]
+    lines += [f"#   {i}: {c['tool']}, lights {c['lights']}, disturbances {c['disturbances']}"
+              for i, c in enumerate(cells)]
     lines += ["scenario: ../second_arm.yaml", "scenario_name: second_arm", f"duration: {DURATION}", "zip:"]
     columns = {"seed": [str(c["seed"]) for c in cells], "tool.model": [c["tool"] for c in cells],
                "lights": [_lights(c["lights"]) for c in cells], "disturbances": [timeline(c) for c in cells]}
