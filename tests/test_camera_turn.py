@@ -1,6 +1,6 @@
 """A camera move re-found from what it left as it was (beyond the paper): the static scene's
 correspondences across the move (``perception.camera_motion``), the camera from them and the held
-tool's points (``eye_to_hand.camera_after_turn``), and the candidates adopting that camera after a
+tool's points (``eye_to_hand_points.camera_after_turn``), and the candidates adopting that camera after a
 camera move (``identification.candidates``, ``keep_tool_points``)."""
 
 from dataclasses import replace
@@ -14,7 +14,8 @@ from test_candidates import CRITERIA, DT, HANDOVER, P_TOOL, TRUTH, hand_pose, se
 from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank
 from sustain_drake.identification.coordination import CAMERA_MOVED
-from sustain_drake.identification.eye_to_hand import build_A, camera_after_turn, pack_x
+from sustain_drake.identification.eye_to_hand import build_A, pack_x
+from sustain_drake.identification.eye_to_hand_points import camera_after_turn
 from sustain_drake.identification.rotation import nearest_rotation
 from sustain_drake.perception import camera_motion
 from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState, SceneTurn

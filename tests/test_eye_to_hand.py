@@ -17,14 +17,8 @@ from sustain_drake.identification import (
     calibrate_eye_to_hand,
 )
 from sustain_drake.identification.candidates import best_p_HP_given_camera
-from sustain_drake.identification.eye_to_hand import (
-    build_A,
-    camera_given_points,
-    conditioning_transform,
-    pack_x,
-    refine_joint,
-    rotation_levers,
-)
+from sustain_drake.identification.eye_to_hand import build_A, conditioning_transform, pack_x
+from sustain_drake.identification.eye_to_hand_points import camera_given_points, refine_joint, rotation_levers
 from sustain_drake.identification.rotation import project_to_rotation
 
 

@@ -3,6 +3,8 @@
 - ``sustainable_identifier``: the constant-memory statistic, its eigen-solution and the verdict.
 - ``rotation``: the §3.2 projection onto SO(3).
 - ``eye_to_hand``: the one-point eye-to-hand formulation (N = 16), conditioning, refinement.
+- ``eye_to_hand_points``: several points sharing one camera (joint refinement, the camera from
+  known points, the camera after a turn).
 - ``payload``: the static payload formulation (N = 5) and the wrench sign convention.
 - ``batch``: ``calibrate_eye_to_hand`` and ``identify_payload`` for recorded data.
 - ``observability``: the checks that make a verdict honest on degenerate or mis-scaled data (what

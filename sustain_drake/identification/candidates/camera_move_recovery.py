@@ -18,10 +18,10 @@ from sustain_drake.identification.candidates.fitting import (
 )
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.params import CandidateParams
-from sustain_drake.identification.eye_to_hand import (
+from sustain_drake.identification.eye_to_hand import pack_x
+from sustain_drake.identification.eye_to_hand_points import (
     camera_after_turn,
     camera_given_points,
-    pack_x,
     spread_off_line,
 )
 

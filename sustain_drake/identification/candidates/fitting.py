@@ -14,9 +14,8 @@ from sustain_drake.identification.eye_to_hand import (
     EyeToHandIdentifier,
     build_A,
     pack_x,
-    refine_joint,
-    rotation_levers,
 )
+from sustain_drake.identification.eye_to_hand_points import refine_joint, rotation_levers
 from sustain_drake.identification.sustainable_identifier import SustainableIdentifier
 
 
@@ -152,7 +151,7 @@ ROUND_OFF_MSE = 1e-12
 
 def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tuple[Candidate, list]:
     """``params.joint``: the leader's camera refined jointly with every other candidate (tracked
-    or archived, ``joint_min_samples`` samples) that it explains (``eye_to_hand.refine_joint``:
+    or archived, ``joint_min_samples`` samples) that it explains (``eye_to_hand_points.refine_joint``:
     one camera, one ``p_HP`` per point). Members are the points whose own mean squared error
     (with their best ``p_HP``) is within ``joint_consistency^2`` times the leader's, first under
     the leader's camera, then again under the joint one (three times with ``stitch_radius``: the
@@ -197,7 +196,7 @@ def inverse_variance_weights(mse: np.ndarray) -> np.ndarray:
 
 
 def smallest_rotation_lever(statistics: list, estimate: EyeToHandEstimate | None) -> float:
-    """The smallest of ``eye_to_hand.rotation_levers`` of the points' statistics (each point with
+    """The smallest of ``eye_to_hand_points.rotation_levers`` of the points' statistics (each point with
     its best ``p_HP``) at the estimate's camera, m (0 without an estimate)."""
     if estimate is None:
         return 0.0
