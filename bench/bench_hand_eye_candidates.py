@@ -84,9 +84,11 @@ def rod_marks_T() -> tuple[np.ndarray, np.ndarray]:
 
 
 def run(scenario_path: Path, duration: float, refinement: RefinementParams | None = None,
-        compare: RefinementParams | None = None, seed: int | None = None) -> dict:
+        compare: RefinementParams | None = None, seed: int | None = None, criteria=None) -> dict:
     """The loop's candidates' points over ``duration`` s: ``tracks[id]`` rows of (time, p_H with the
-    true camera, rod tip, p_CP, X_WH) for the ``refinement``'s points (the tracker's if None), and
+    true camera, rod tip, p_CP, X_WH, and ``criteria(gray, refined pixels)``'s row for the point
+    when given: a K x m array of per-point figures) for the ``refinement``'s points (the tracker's
+    if None), and
     ``versions[id]`` rows of (X_CH true, {variant: p_CP or None}) for the three ``VARIANTS`` (the
     refined ones with ``compare``'s other settings)."""
     # A path, or a scenario already loaded (and changed) by the caller.
@@ -137,7 +139,9 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
             color = station.GetOutputPort("color_image").Eval(sc).data
             depth = station.GetOutputPort("depth_image").Eval(sc).data
             if refinement is not None:
-                refined, refined_ok = refine_points(color, depth, features.p_px, info, refinement)
+                refined, refined_ok, refined_px = refine_points(color, depth, features.p_px, info, refinement,
+                                                                return_pixels=True)
+                figures = None if criteria is None else criteria(to_gray(color), refined_px)
             both = {name: refine_points(color, depth, features.p_px, info, params)
                     for name, params in by_depth.items()}
             # Why a refined point is not valid: no corner near the tracked pixel (or the window
@@ -163,7 +167,8 @@ def run(scenario_path: Path, duration: float, refinement: RefinementParams | Non
                 p_CP = features.p_CP[k]
             p_W = X_WC[:3, :3] @ p_CP + X_WC[:3, 3]
             p_H = X_WH[:3, :3].T @ (p_W - X_WH[:3, 3])
-            tracks.setdefault(fid, []).append((features.time, p_H, tip, p_CP.copy(), X_WH.copy()))
+            figure = None if refinement is None or criteria is None else figures[k]
+            tracks.setdefault(fid, []).append((features.time, p_H, tip, p_CP.copy(), X_WH.copy(), figure))
     sc = station.GetMyContextFromRoot(root)
     X_WC = station.GetOutputPort("true_X_WC").Eval(sc).GetAsMatrix4()
     pc = plant.GetMyContextFromRoot(root)

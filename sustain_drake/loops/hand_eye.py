@@ -189,8 +189,9 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     candidate_params = dataclasses.replace(hand_eye.candidates)
     # The refiner's windows scaled to the camera (loops.pixel_scale).
     refinement = scaled(dataclasses.replace(hand_eye.refinement), pixel_scale(info),
-                        lengths=("max_shift_px",), windows=("corner_window_px", "depth_window_px",
-                                                            "blob_window_px", "symmetry_window_px"))
+                        lengths=("max_shift_px",),
+                        windows=("corner_window_px", "depth_window_px", "blob_window_px",
+                                 "symmetry_window_px"))
     body = add_body_detection(builder, info, num_joints, fps, perception)
     tracker, detector, period = body.tracker, body.detector, 1.0 / fps
     formulation = EyeToHandFormulation(criteria, hand_eye.coordination.forgetting_factor)

@@ -214,7 +214,7 @@ RANGES: dict[type, dict[str, Range]] = {
         "depth_window_px": _from(0, 50), "surface_tolerance": _above(0, 1, "m"),
         "min_fraction": _above(0, 1), "blob_window_px": _from(0, 50),
         "max_incidence_deg": _above(0, 90, "deg"), "symmetry_window_px": _from(0, 50),
-        "min_symmetry": _from(-1, 1),
+        "min_symmetry": _from(-1, 1), "max_view_shift": _from(0, 0.1, "m"),
     },
     KinestheticConfig: {"period": _from(1e-4, 1, "s"), "min_touch_force": _from(0, 1000, "N"),
                         "eval_min_force": _from(0, 1000, "N")},
