@@ -93,6 +93,7 @@ def test_a_loop_that_is_off_has_no_systems_and_no_ports():
 
 @pytest.mark.parametrize("kwargs, argument", [
     (dict(loops=(True, False)), "loops must be a Loops"),
+    (dict(loops=Loops(payload="no")), "loops.payload must be a bool, got 'no'"),
     (dict(loops=Loops(hand_eye=False, payload=False)), "loops has no loop on"),
     (dict(loops=Loops(payload=False, touch=True)), "loops.touch needs loops.payload"),
     (dict(loops=Loops(touch=True)), "loops.touch needs held_shape"),

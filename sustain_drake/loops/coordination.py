@@ -5,7 +5,7 @@ payload, touch) behind documented ports."""
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -88,6 +88,9 @@ def _checked(a: _Arguments) -> _Arguments:
     wrong type, an option of a loop that is off, no loop on, or sizes that disagree."""
     if not isinstance(a.loops, Loops):
         raise TypeError(f"{OWNER}: loops must be a Loops, got {type(a.loops).__name__}")
+    for name in (f.name for f in fields(Loops)):
+        if not isinstance(getattr(a.loops, name), bool):
+            raise TypeError(f"{OWNER}: loops.{name} must be a bool, got {getattr(a.loops, name)!r}")
     if not (a.loops.hand_eye or a.loops.payload):
         raise ValueError(f"{OWNER}: loops has no loop on: turn on loops.hand_eye or loops.payload")
     if a.loops.touch and not a.loops.payload:
