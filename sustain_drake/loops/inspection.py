@@ -1,6 +1,7 @@
 """The loops' inspectable outputs wired (issue 28, item 4): ``add_inspection`` adds an
 ``AdoptedEstimates`` (every estimate with its validity flag and uncertainty) and, with the hand-eye
-loop, a ``FollowedPoint`` (the followed tracked point, the candidates' states)."""
+loop, a ``FollowedPoint`` (the followed tracked point, the candidates' states);
+``add_estimate_overlay`` draws them in Meshcat beside the truth (``EstimateOverlay``)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from dataclasses import dataclass
 from sustain_drake.loops.hand_eye import HandEyeLoop
 from sustain_drake.loops.payload import PayloadLoop
 from sustain_drake.systems.coordination_outputs import AdoptedEstimates, FollowedPoint
+from sustain_drake.systems.estimate_overlay import EstimateOverlay, OverlayConfig
 
 
 @dataclass
@@ -38,3 +40,19 @@ def add_inspection(builder, hand_eye: HandEyeLoop | None, payload: PayloadLoop |
         builder.Connect(adopted_x, followed.GetInputPort("reference_x"))
     return Inspection(adopted, followed)
 
+
+def add_estimate_overlay(builder, meshcat, camera_info, inspection: Inspection, X_WH, true_X_WC=None,
+                         config: OverlayConfig | None = None) -> EstimateOverlay:  # fmt: skip
+    """Adds an ``EstimateOverlay`` drawing the hand-eye ``inspection``'s camera and followed point
+    in ``meshcat`` (frustum of ``camera_info``), the point placed by the hand pose output port
+    ``X_WH``; beside the true camera from the output port ``true_X_WC`` if given."""
+    overlay = builder.AddSystem(EstimateOverlay(meshcat, camera_info, config))
+    overlay.set_name("estimate_overlay")
+    for name in ("X_WC", "X_WC_valid"):
+        builder.Connect(inspection.adopted.GetOutputPort(name), overlay.GetInputPort(name))
+    for name in ("followed_point", "followed_point_valid"):
+        builder.Connect(inspection.followed.GetOutputPort(name), overlay.GetInputPort(name))
+    builder.Connect(X_WH, overlay.GetInputPort("X_WH"))
+    if true_X_WC is not None:
+        builder.Connect(true_X_WC, overlay.GetInputPort("true_X_WC"))
+    return overlay
