@@ -154,36 +154,6 @@ def test_images_to_first_convergence():
     assert rms < 5e-3
 
 
-def test_estimate_visualizer_draws_the_estimate_beside_the_truth():
-    from types import SimpleNamespace
-
-    from pydrake.math import RotationMatrix
-
-    from sustain_drake.identification.eye_to_hand import EyeToHandEstimate
-    from sustain_drake.station.meshcat import make_local_meshcat
-
-    meshcat = make_local_meshcat()
-    viz = hand_eye.EstimateVisualizer(meshcat)
-    context = viz.CreateDefaultContext()
-    R = RotationMatrix.MakeZRotation(0.3).matrix()
-    estimate = EyeToHandEstimate(R, np.array([0.1, 0.2, 0.9]), np.array([0.0, 0.0, 0.3]), np.zeros(16), 0.0)
-    viz.GetInputPort("adopted_solution").FixValue(context, SimpleNamespace(estimate=estimate))
-    viz.GetInputPort("mode").FixValue(context, [coordination.OBSERVE])
-    viz.GetInputPort("X_WH").FixValue(context, RigidTransform([0.4, 0.0, 0.5]))
-    viz.GetInputPort("true_X_WC").FixValue(context, RigidTransform([0.1, 0.2, 0.9]))
-    viz.GetInputPort("true_p_HP").FixValue(context, [0.0, 0.0, 0.3])
-    viz.ForcedPublish(context)
-    for path in ("estimated_camera", "true_camera", "estimated_point", "true_point"):
-        assert meshcat.HasPath(f"/hand_eye/{path}")
-    # The estimated point is drawn at X_WH p_HP (the packed message holds the 4x4 matrix, column
-    # major, as a msgpack array of 16 big-endian float64).
-    packed = meshcat._GetPackedTransform("/hand_eye/estimated_point")
-    start = packed.index(b"\xdc\x00\x10") + 3
-    matrix = np.array([np.frombuffer(packed[start + 9 * i + 1:start + 9 * (i + 1)], ">f8")[0]
-                       for i in range(16)])
-    assert np.allclose(matrix[12:15], [0.4, 0.0, 0.8])
-
-
 def test_a_cloned_context_keeps_its_own_tracker_and_candidate_states():
     """The tracker's and the candidates' states are shared between a context and its clone (no
     deep copy per update): advancing one must leave the other's as it was."""

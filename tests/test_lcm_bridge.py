@@ -12,6 +12,7 @@ from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U, Imag
 from test_sustainable_coordination import MASS, P_KCM, payload_wrench, sensor_noise, three_joint_arm
 
 from sustain_drake.identification import coordination
+from sustain_drake.loops import Loops
 from sustain_drake.loops.lcm_bridge import (
     LCM_INPUT_CHANNELS,
     LCM_OUTPUT_CHANNELS,
@@ -105,3 +106,18 @@ def test_bridge_rejects_unknown_channel_keys():
         make_lcm_bridge(DrakeLcm("memq://"), CameraInfo(160, 120, 1.0), 3, plant=plant,
                         hand_frame=plant.GetBodyByName("link3").body_frame(),
                         output_channels={"mass": "M"})  # fmt: skip
+
+
+def test_a_loop_that_is_off_is_neither_read_nor_published():
+    """Hand-eye only: no force/torque subscription, no payload channels; payload only: no images."""
+    plant = three_joint_arm()
+    hand = plant.GetBodyByName("link3").body_frame()
+    vision = make_lcm_bridge(DrakeLcm("memq://"), CameraInfo(160, 120, 1.0), 3, plant=plant, hand_frame=hand,
+                             loops=Loops(payload=False))  # fmt: skip
+    names = {s.get_name() for s in vision.GetSystems()}
+    assert "lcm_subscriber_images" in names and "lcm_subscriber_force_torque" not in names
+    payload = make_lcm_bridge(DrakeLcm("memq://"), None, 3, plant=plant, hand_frame=hand,
+                              loops=Loops(hand_eye=False))  # fmt: skip
+    names = {s.get_name() for s in payload.GetSystems()}
+    assert "lcm_subscriber_force_torque" in names and "lcm_subscriber_images" not in names
+    Simulator(payload).AdvanceTo(0.05)  # every input the payload loop needs is connected

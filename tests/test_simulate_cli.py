@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_estimate_overlay import recorded_tracks
 
 from sustain_drake.cli.main import main
 from sustain_drake.station.scenario import load_scenario_string, scenario_text
@@ -22,6 +23,10 @@ def test_simulate_writes_a_replay_and_logs(tmp_path, capsys):
     html = (out / "replay.html").read_text()
     assert "<html" in html.lower() and len(html) > 10_000
     assert 'src="http' not in html  # self-contained: no scripts fetched from the network
+    # The overlay: the true camera's frustum from the start, the estimated one hidden (none yet).
+    tracks = recorded_tracks(html)
+    assert tracks["/overlay/true_camera"][".visible"][0][1] is True
+    assert all(visible is False for _, visible in tracks["/overlay/estimated_camera"][".visible"])
     log = np.load(out / "log.npz")
     t = log["time"]
     assert t[0] == 0.0 and t[-1] == pytest.approx(0.3, abs=0.011)

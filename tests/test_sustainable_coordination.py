@@ -20,6 +20,7 @@ from pydrake.systems.sensors import CameraInfo, ImageDepth32F, ImageRgba8U
 from sustain_drake.identification import coordination
 from sustain_drake.loops.coordination import (
     RANGE_MARGIN,
+    Loops,
     joint_ranges_from_limits,
     make_sustainable_coordination,
 )
@@ -124,6 +125,8 @@ def test_identifies_the_payload_of_a_three_joint_arm_from_its_plant():
     sc_context = sc.GetMyContextFromRoot(context)
     assert sc.GetOutputPort("payload_mode").Eval(sc_context)[0] == coordination.IDENTIFY
     assert sc.GetOutputPort("payload_mass").Eval(sc_context)[0] == 0.0  # nothing adopted yet
+    assert sc.GetOutputPort("payload_valid").Eval(sc_context)[0] == 0.0
+    assert np.all(np.isinf(sc.GetOutputPort("payload_sd").Eval(sc_context)))  # not known
     simulator.AdvanceTo(3.0)
 
     assert sc.GetOutputPort("payload_mode").Eval(sc_context)[0] == coordination.OBSERVE
@@ -131,6 +134,13 @@ def test_identifies_the_payload_of_a_three_joint_arm_from_its_plant():
     assert [e.kind for e in events].count(coordination.CONVERGED) == 1
     assert sc.GetOutputPort("payload_mass").Eval(sc_context)[0] == pytest.approx(MASS, rel=0.01)
     np.testing.assert_allclose(sc.GetOutputPort("p_KCm").Eval(sc_context), P_KCM, atol=3e-3)
+    assert sc.GetOutputPort("payload_valid").Eval(sc_context)[0] == 1.0
+    # The uncertainty (1 sd, kg and m: millimetres from 12 postures) covers the error.
+    sd = sc.GetOutputPort("payload_sd").Eval(sc_context)
+    assert np.all(np.isfinite(sd)) and np.all(sd > 0) and sd[0] < 0.004 and np.all(sd[1:] < 5e-3)
+    assert abs(sc.GetOutputPort("payload_mass").Eval(sc_context)[0] - MASS) < 4.0 * sd[0]
+    assert np.all(np.abs(sc.GetOutputPort("p_KCm").Eval(sc_context) - P_KCM) < 4.0 * sd[1:])
+    assert sc.GetOutputPort("payload_reset_reason").Eval(sc_context)[0] == coordination.NO_RESET
     # The hand pose is the plant's forward kinematics at the last posture.
     plant_context = plant.CreateDefaultContext()
     plant.SetPositions(plant_context, postures[-1])
@@ -139,7 +149,8 @@ def test_identifies_the_payload_of_a_three_joint_arm_from_its_plant():
     assert not X_WH.IsNearlyEqualTo(RigidTransform(), 1e-3)
     # No texture, no features: the hand-eye loop runs but has nothing to adopt.
     assert sc.GetOutputPort("hand_eye_mode").Eval(sc_context)[0] == coordination.IDENTIFY
-    assert sc.GetOutputPort("X_WC").Eval(sc_context).IsExactlyIdentity()
+    assert sc.GetOutputPort("X_WC_valid").Eval(sc_context)[0] == 0.0  # X_WC (the identity) means nothing
+    assert sc.GetOutputPort("followed_point_valid").Eval(sc_context)[0] == 0.0
     # The payload's state machine asked the motion to pause once (after its convergence).
     assert sc.GetOutputPort("payload_pause").Eval(sc_context)[0] == 1
 
@@ -152,7 +163,8 @@ def test_touch_on_the_held_object_after_the_payload_is_adopted():
     p_KP, f_env_K = np.array([0.0, 0.0, 0.2]), np.array([0.0, 0.0, -8.0])
     sc, simulator = _arm_with_coordination(
         plant, postures, info, arm_kwargs=dict(push_time=3.2, p_KP=p_KP, f_env_K=f_env_K),
-        held_shape=Box(0.04, 0.04, 0.2), X_KG=RigidTransform([0.0, 0.0, 0.1]))  # fmt: skip
+        loops=Loops(touch=True), held_shape=Box(0.04, 0.04, 0.2),
+        X_KG=RigidTransform([0.0, 0.0, 0.1]))  # fmt: skip
     sc_context = sc.GetMyContextFromRoot(simulator.get_mutable_context())
     simulator.AdvanceTo(3.15)
     assert sc.GetOutputPort("payload_mode").Eval(sc_context)[0] == coordination.OBSERVE

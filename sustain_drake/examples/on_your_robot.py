@@ -9,8 +9,8 @@ position-controlled arm lags its command a little; its encoders then give ``join
 Everything is public API: a ``MultibodyPlant`` of the arm, Drake's ``RgbdSensor``, the
 ``MotionGenerator`` babbling (``sustain_drake.systems.motion_generator``) answering the
 coordination's pause and confirm requests, and ``make_sustainable_coordination(camera, 6,
-plant=plant, hand_frame=hand)``. The wrist wrench is fed zeros: the diagram requires the input, and
-the payload loop's outputs are not read.
+loops=Loops(payload=False), plant=plant, hand_frame=hand)``: the hand-eye loop only (no wrist
+force/torque sensor, so no ``wrench`` input).
 
     .venv/bin/python -m sustain_drake.examples.on_your_robot [--duration 90] [--seed 0]
 """
@@ -30,12 +30,12 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
-from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, SharedPointerSystem
+from pydrake.systems.primitives import Demultiplexer, SharedPointerSystem
 from pydrake.systems.rendering import MultibodyPositionToGeometryPose
 from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from sustain_drake.identification.rotation import rotation_angle
-from sustain_drake.loops import make_sustainable_coordination
+from sustain_drake.loops import Loops, make_sustainable_coordination
 from sustain_drake.station import models_dir
 from sustain_drake.systems.camera_sampler import RgbdCameraSampler
 from sustain_drake.systems.depth_noise import DepthNoiseModel
@@ -145,24 +145,21 @@ def build(seed: int = 0) -> OnYourRobot:
     config = camera_config()
     camera = add_camera(builder, scene_graph, config, X_WC, seed)
     hand = plant.GetBodyByName("gripper").body_frame()  # the hand frame H (here also the wrist's K)
-    coordination = builder.AddSystem(make_sustainable_coordination(config, 6, plant=plant, hand_frame=hand))
+    coordination = builder.AddSystem(make_sustainable_coordination(
+        config, 6, loops=Loops(payload=False), plant=plant, hand_frame=hand))  # fmt: skip
     lower, upper = np.array(JOINT_RANGES).T
     motion = builder.AddSystem(MotionGenerator(lower, upper, START, seed=seed, max_speed=0.6))
     motion.set_name("motion_generator")
 
-    # The arm follows the babbling's desired state [q, v]: its encoders read q, and v.
+    # The arm follows the babbling's desired state [q, v]: its encoders read q (the velocities are
+    # the payload loop's, which is off).
     state = builder.AddSystem(Demultiplexer([6, 6]))
     state.set_name("arm_state")
     builder.Connect(motion.GetOutputPort("desired_state"), state.get_input_port())
     builder.Connect(state.get_output_port(0), arm_positions)
     builder.Connect(state.get_output_port(0), coordination.GetInputPort("joint_positions"))
-    builder.Connect(state.get_output_port(1), coordination.GetInputPort("joint_velocities"))
     for name in ("color_image", "depth_image", "image_time"):
         builder.Connect(camera.GetOutputPort(name), coordination.GetInputPort(name))
-    # No wrist force/torque sensor: the (required) wrench input reads zeros.
-    no_wrench = builder.AddSystem(ConstantVectorSource(np.zeros(6)))
-    no_wrench.set_name("no_wrench")
-    builder.Connect(no_wrench.get_output_port(), coordination.GetInputPort("wrench"))
     # The babbling answers the coordination's requests: it stops after a convergence, and goes back
     # to a posture (then moves again) to confirm which pixels are the hand, or to a far posture.
     builder.Connect(coordination.GetOutputPort("hand_eye_pause"), motion.GetInputPort("pause"))
@@ -192,6 +189,7 @@ class Run:
     wall_time: float = 0.0  # s
     events: list[Event] = field(default_factory=list)
     hand_eye_mode: int = 0  # 0 identify, 1 observe (an adopted camera and tool point in use)
+    X_WC_valid: bool = False  # the coordination's X_WC_valid output: a camera is adopted
     X_WC: RigidTransform = field(default_factory=RigidTransform)  # the coordination's X_WC output
     p_HP: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m, its p_HP output
     camera_error_mm: float = math.nan  # X_WC against the true camera (nan: none adopted)
@@ -214,8 +212,9 @@ def run(duration: float, seed: int = 0, on_event=None) -> Run:
     port = robot.coordination.GetOutputPort
 
     def adopted_error() -> tuple[float, float]:
-        X_WC = port("X_WC").Eval(context)  # the identity until a camera is adopted
-        return (math.nan, math.nan) if X_WC.IsExactlyIdentity() else camera_error(X_WC, robot.true_X_WC)
+        if not port("X_WC_valid").Eval(context)[0]:  # no camera adopted: X_WC means nothing
+            return math.nan, math.nan
+        return camera_error(port("X_WC").Eval(context), robot.true_X_WC)
 
     def monitor(root_context) -> EventStatus:
         for e in port("hand_eye_events").Eval(context)[len(result.events):]:
@@ -229,6 +228,7 @@ def run(duration: float, seed: int = 0, on_event=None) -> Run:
     result.simulator.AdvanceTo(duration)
     result.wall_time = time.perf_counter() - start
     result.hand_eye_mode = int(port("hand_eye_mode").Eval(context)[0])
+    result.X_WC_valid = bool(port("X_WC_valid").Eval(context)[0])
     result.X_WC = port("X_WC").Eval(context)
     result.p_HP = np.array(port("p_HP").Eval(context))
     result.camera_error_mm, result.camera_error_deg = adopted_error()

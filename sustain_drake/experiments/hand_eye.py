@@ -24,10 +24,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.geometry import Cylinder, Rgba, Sphere
-from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.systems.framework import LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
 from sustain_drake.experiments import hand_eye_metrics as m
@@ -38,6 +34,7 @@ from sustain_drake.identification.candidates import best_p_HP_given_camera
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.loops.hand_eye import add_hand_eye_loop
+from sustain_drake.loops.inspection import add_estimate_overlay, add_inspection
 from sustain_drake.station import ScenarioError, camera_info
 from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
@@ -108,12 +105,9 @@ def add_to_diagram(builder, station, scenario, meshcat) -> HandEyeHandle:
         matrix.set_name(f"hand_eye_{name}_matrix")
         builder.Connect(station.GetOutputPort(name), matrix.get_input_port())
         loggers[name] = LogVectorOutput(matrix.get_output_port(), builder, period)
-    if meshcat is not None:
-        viz = builder.AddSystem(EstimateVisualizer(meshcat))
-        builder.Connect(machine.GetOutputPort("adopted_solution"), viz.GetInputPort("adopted_solution"))
-        builder.Connect(machine.GetOutputPort("mode"), viz.GetInputPort("mode"))
-        for name in ("X_WH", "true_X_WC", "true_p_HP"):
-            builder.Connect(station.GetOutputPort(name), viz.GetInputPort(name))
+    if meshcat is not None:  # the replay shows the estimated camera and followed point beside the truth
+        add_estimate_overlay(builder, meshcat, camera_info(scenario), add_inspection(builder, loop, None),
+                             station.GetOutputPort("X_WH"), station.GetOutputPort("true_X_WC"))
     return HandEyeHandle(scenario, tracker, detector, candidates, machine, loggers, loop.camera_motion,
                          tool_boxes(station))
 
@@ -134,71 +128,6 @@ def tool_boxes(station) -> tuple:
             X_TB = inspector.GetPoseInFrame(geometry) @ obb.pose()
             boxes.append(m.Box(X_TB.GetAsMatrix4(), np.array(obb.half_width())))
     return tuple(boxes)
-
-
-class EstimateVisualizer(LeafSystem):
-    """Shows the adopted camera frame and tracked point beside the true ones in Meshcat (and in
-    its recording): a side effect, so a periodic publish event.
-
-    .. pydrake_system::
-
-        name: EstimateVisualizer
-        input_ports:
-        - adopted_solution
-        - mode
-        - X_WH
-        - true_X_WC
-        - true_p_HP
-
-    Paths under ``/hand_eye``: ``estimated_camera`` (a triad, hidden before an adoption),
-    ``true_camera`` (a thinner, paler triad), ``estimated_point`` (an orange sphere at
-    ``X_WH p_HP`` of the adopted estimate; green while observing, orange while identifying)
-    and ``true_point`` (a small white sphere at the true tool tip). Evaluation display only.
-    """
-
-    def __init__(self, meshcat, period: float = 1.0 / 15.0, prefix: str = "/hand_eye"):
-        super().__init__()
-        self._meshcat, self._prefix = meshcat, prefix
-        self._solution = self.DeclareAbstractInputPort("adopted_solution", AbstractValue.Make(object()))
-        self._mode = self.DeclareVectorInputPort("mode", 1)
-        self._X_WH = self.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform()))
-        self._X_WC = self.DeclareAbstractInputPort("true_X_WC", AbstractValue.Make(RigidTransform()))
-        self._p_HP = self.DeclareVectorInputPort("true_p_HP", 3)
-        _triad(meshcat, f"{prefix}/estimated_camera", 0.12, 0.004, 1.0)
-        _triad(meshcat, f"{prefix}/true_camera", 0.08, 0.002, 0.4)
-        meshcat.SetObject(f"{prefix}/estimated_point", Sphere(0.012), Rgba(1.0, 0.5, 0.0, 0.9))
-        meshcat.SetObject(f"{prefix}/true_point", Sphere(0.006), Rgba(1.0, 1.0, 1.0, 1.0))
-        self.DeclarePeriodicPublishEvent(period, 0.0, self._publish)
-        self.DeclareForcedPublishEvent(self._publish)
-
-    def _publish(self, context) -> None:
-        t = context.get_time()
-        meshcat, prefix = self._meshcat, self._prefix
-        X_WH = self._X_WH.Eval(context)
-        meshcat.SetTransform(f"{prefix}/true_camera", self._X_WC.Eval(context), t)
-        meshcat.SetTransform(f"{prefix}/true_point", RigidTransform(X_WH @ self._p_HP.Eval(context)), t)
-        solution = self._solution.Eval(context)
-        estimate = getattr(solution, "estimate", None)
-        shown = estimate is not None
-        for name in ("estimated_camera", "estimated_point"):
-            meshcat.SetProperty(f"{prefix}/{name}", "visible", shown, t)
-        if shown:
-            meshcat.SetTransform(f"{prefix}/estimated_camera",
-                                 RigidTransform(RotationMatrix(estimate.R_WC), estimate.p_WC), t)
-            meshcat.SetTransform(f"{prefix}/estimated_point", RigidTransform(X_WH @ estimate.p_HP), t)
-            observing = self._mode.Eval(context)[0] == coordination.OBSERVE
-            color = [0.1, 0.8, 0.2, 0.9] if observing else [1.0, 0.5, 0.0, 0.9]
-            meshcat.SetProperty(f"{prefix}/estimated_point/<object>", "color", color, t)
-
-
-def _triad(meshcat, path: str, length: float, radius: float, opacity: float) -> None:
-    """Red x, green y, blue z axes as cylinders (Meshcat has no triad primitive)."""
-    axes = {"x": (RotationMatrix.MakeYRotation(math.pi / 2), [1, 0, 0]),
-            "y": (RotationMatrix.MakeXRotation(-math.pi / 2), [0, 1, 0]),
-            "z": (RotationMatrix(), [0, 0, 1])}
-    for name, (R, color) in axes.items():
-        meshcat.SetObject(f"{path}/{name}", Cylinder(radius, length), Rgba(*color, opacity))
-        meshcat.SetTransform(f"{path}/{name}", RigidTransform(R, R.matrix()[:, 2] * length / 2))
 
 
 # ---- evaluation ------------------------------------------------------------------------------

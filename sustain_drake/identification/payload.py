@@ -106,6 +106,8 @@ class PayloadSolution(SolutionProperties):
         expected_mse: ``a^2 lambda_N`` (Eq. (13)), in (m/s^2)^2 + (N m)^2 per sample.
         verdict: the convergence verdict.
         num_samples: samples behind this solution.
+        covariance: the covariance (4 x 4) of ``(mass, p_KCm)`` in kg and m
+            (``observability.payload_covariance``) when the one solving attached it, else None.
     """
 
     num_unknowns: ClassVar[int] = N_UNKNOWNS
@@ -117,6 +119,7 @@ class PayloadSolution(SolutionProperties):
     expected_mse: float
     verdict: Verdict
     num_samples: int
+    covariance: np.ndarray | None = None
 
     @property
     def ssd(self) -> float:

@@ -4,7 +4,9 @@
 - ``hand_eye``: the marker-free eye-to-hand loop (§3.4, Fig. 7), ``HandEyeConfig``.
 - ``payload``: the payload identification and touch loop (§3.5), ``KinestheticConfig``.
 - ``identify_observe``: the rule's thresholds (``CoordinationConfig``) and the loop's wiring.
-- ``coordination``: ``make_sustainable_coordination``, both loops as one Diagram for a controller.
+- ``coordination``: ``make_sustainable_coordination``, the loops chosen (``Loops``) as one Diagram for a
+  controller.
+- ``inspection``: the inspectable outputs (validity flags, uncertainty, the followed point).
 - ``lcm_bridge``: ``make_lcm_bridge``, that Diagram on a robot speaking LCM.
 
 The settings dataclasses are the scenario file's sections (``station.scenario``) and the keyword
@@ -13,10 +15,10 @@ arguments of ``make_sustainable_coordination``; each field's comment is its docu
 """
 
 from sustain_drake.loops.body_detection import BodyDetectionConfig
-from sustain_drake.loops.coordination import camera_intrinsics, make_sustainable_coordination
+from sustain_drake.loops.coordination import Loops, camera_intrinsics, make_sustainable_coordination
 from sustain_drake.loops.hand_eye import HandEyeConfig
 from sustain_drake.loops.identify_observe import CoordinationConfig
 from sustain_drake.loops.payload import KinestheticConfig
 
-__all__ = ["BodyDetectionConfig", "CoordinationConfig", "HandEyeConfig", "KinestheticConfig",
+__all__ = ["BodyDetectionConfig", "CoordinationConfig", "HandEyeConfig", "KinestheticConfig", "Loops",
            "camera_intrinsics", "make_sustainable_coordination"]

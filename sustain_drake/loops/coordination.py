@@ -1,70 +1,134 @@
 """The whole sustainable sensory-motor coordination as one Diagram for any controller and any arm:
-``make_sustainable_coordination`` combines the hand-eye loop and the payload loop behind documented
-ports."""
+``make_sustainable_coordination`` combines the loops chosen at construction (``Loops``: hand-eye,
+payload, touch) behind documented ports."""
 
 from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass, fields
 
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
-from pydrake.systems.sensors import CameraConfig, CameraInfo
+from pydrake.systems.sensors import CameraConfig, CameraInfo, ImageDepth32F, ImageRgba8U
 
 from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.loops.hand_eye import HandEyeConfig, add_hand_eye_loop
+from sustain_drake.loops.inspection import add_inspection
 from sustain_drake.loops.payload import KinestheticConfig, add_payload_loop
+from sustain_drake.systems.coordination_outputs import AdoptedEstimates, InputsConnected, RequiredInput
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
 
+__all__ = ["AdoptedEstimates", "Loops", "camera_intrinsics", "joint_ranges_from_limits",
+           "make_sustainable_coordination"]
 
-class AdoptedEstimates(LeafSystem):
-    """The adopted (converged and still observed) estimates of the two state machines as plain ports.
+OWNER = "make_sustainable_coordination"
+DEFAULT_FPS = 30.0  # frames per second of the camera when ``fps`` is not given
 
-    .. pydrake_system::
 
-        name: AdoptedEstimates
-        input_ports:
-        - hand_eye_solution
-        - payload_solution
-        output_ports:
-        - X_WC
-        - p_HP
-        - payload_mass
-        - p_KCm
+@dataclass(frozen=True)
+class Loops:
+    """Which loops a ``make_sustainable_coordination`` diagram runs. A loop that is off has no
+    systems and no ports in the diagram (and its inputs need no sensor)."""
 
-    Inputs: the ``adopted_solution`` of the hand-eye and of the payload ``CoordinationStateMachine``
-    (None before an adoption and after a detected change). Outputs: ``X_WC`` (RigidTransform, the
-    camera pose), ``p_HP`` (3, m, the tool point in the hand frame), ``payload_mass`` (1, kg),
-    ``p_KCm`` (3, m, the payload's centre of mass in the sensor frame). With nothing adopted they
-    hold the identity, zeros and a zero mass (never NaN): read the ``*_mode`` outputs to know.
-    """
+    hand_eye: bool = True  # the marker-free hand-eye loop: needs the depth camera's images
+    payload: bool = True  # payload identification: needs the wrist wrench and the joint velocities
+    touch: bool = False  # touch estimation on the held object (held_shape): needs the payload loop
 
-    def __init__(self):
-        super().__init__()
-        self._hand_eye = self.DeclareAbstractInputPort("hand_eye_solution", AbstractValue.Make(object()))
-        self._payload = self.DeclareAbstractInputPort("payload_solution", AbstractValue.Make(object()))
-        self.DeclareAbstractOutputPort("X_WC", lambda: AbstractValue.Make(RigidTransform()), self._calc_X_WC)
-        self.DeclareVectorOutputPort("p_HP", 3, self._calc_p_HP)
-        self.DeclareVectorOutputPort("payload_mass", 1, self._calc_mass)
-        self.DeclareVectorOutputPort("p_KCm", 3, self._calc_p_KCm)
 
-    def _estimate(self, context):
-        return getattr(self._hand_eye.Eval(context), "estimate", None)
+# The diagram's inputs in port order, with what to connect when one is left unconnected.
+_INPUTS = ("color_image", "depth_image", "image_time", "joint_positions", "joint_velocities", "X_WH",
+           "wrench")
+_ADVICE = {
+    "color_image": "connect the camera's colour image (ImageRgba8U, e.g. RgbdSensor's color_image), or "
+                   "build with loops=Loops(hand_eye=False)",
+    "depth_image": "connect the camera's depth image (ImageDepth32F in m, e.g. RgbdSensor's "
+                   "depth_image_32f), or build with loops=Loops(hand_eye=False)",
+    "joint_positions": "connect the arm's {n} joint positions (rad, the encoders)",
+    "joint_velocities": "connect the arm's {n} joint velocities (rad/s), or build with "
+                        "loops=Loops(payload=False)",
+    "X_WH": "connect the hand pose in the world (RigidTransform), or build with plant= and hand_frame=",
+    "wrench": "connect the wrist force/torque sensor's [tau_K; f_K] (6, N m and N, in the sensor frame K), "
+              "or build with loops=Loops(payload=False)",
+}  # fmt: skip
 
-    def _calc_X_WC(self, context, output) -> None:
-        est = self._estimate(context)
-        output.set_value(RigidTransform() if est is None else RigidTransform(est.X_WC))
 
-    def _calc_p_HP(self, context, output) -> None:
-        est = self._estimate(context)
-        output.SetFromVector(np.zeros(3) if est is None else est.p_HP)
+@dataclass
+class _Arguments:
+    """``make_sustainable_coordination``'s arguments, checked (``_checked``) and defaulted."""
 
-    def _calc_mass(self, context, output) -> None:
-        solution = self._payload.Eval(context)
-        output.SetAtIndex(0, 0.0 if solution is None else solution.mass)
+    camera_info: object
+    num_joints: int
+    loops: Loops
+    fps: float | None
+    hand_eye: HandEyeConfig | None
+    body_detection: BodyDetectionConfig | None
+    kinesthetic: KinestheticConfig | None
+    plant: object
+    hand_frame: object
+    sensor_frame: object
+    model_instance: object
+    held_shape: object
+    X_KG: RigidTransform | None
+    joint_ranges: object
+    motion_seed: int | None
 
-    def _calc_p_KCm(self, context, output) -> None:
-        solution = self._payload.Eval(context)
-        output.SetFromVector(np.zeros(3) if solution is None else solution.p_KCm)
+
+# The arguments that belong to one loop: given while it is off, they are an error.
+_LOOP_ARGUMENTS = {"hand_eye": ("camera_info", "fps", "hand_eye", "body_detection", "joint_ranges",
+                                "motion_seed"),
+                   "payload": ("kinesthetic", "sensor_frame"), "touch": ("held_shape", "X_KG")}
+_TYPES = {"hand_eye": HandEyeConfig, "body_detection": BodyDetectionConfig, "kinesthetic": KinestheticConfig,
+          "X_KG": RigidTransform}  # fmt: skip
+
+
+def _checked(a: _Arguments) -> _Arguments:
+    """``a`` with defaults filled in; a one-line TypeError or ValueError naming the argument for a
+    wrong type, an option of a loop that is off, no loop on, or sizes that disagree."""
+    if not isinstance(a.loops, Loops):
+        raise TypeError(f"{OWNER}: loops must be a Loops, got {type(a.loops).__name__}")
+    for name in (f.name for f in fields(Loops)):
+        if not isinstance(getattr(a.loops, name), bool):
+            raise TypeError(f"{OWNER}: loops.{name} must be a bool, got {getattr(a.loops, name)!r}")
+    if not (a.loops.hand_eye or a.loops.payload):
+        raise ValueError(f"{OWNER}: loops has no loop on: turn on loops.hand_eye or loops.payload")
+    if a.loops.touch and not a.loops.payload:
+        raise ValueError(f"{OWNER}: loops.touch needs loops.payload (the touch estimator reads the payload)")
+    for loop, names in _LOOP_ARGUMENTS.items():
+        given = [name for name in names if getattr(a, name) is not None]
+        if given and not getattr(a.loops, loop):
+            raise ValueError(f"{OWNER}: {given[0]} is an option of the {loop} loop, which is off "
+                             f"(loops.{loop} = False)")  # fmt: skip
+    for name, kind in _TYPES.items():
+        value = getattr(a, name)
+        if value is not None and not isinstance(value, kind):
+            raise TypeError(f"{OWNER}: {name} must be a {kind.__name__}, got {type(value).__name__}")
+    if isinstance(a.num_joints, bool) or not isinstance(a.num_joints, numbers.Integral) or a.num_joints < 1:
+        raise ValueError(f"{OWNER}: num_joints must be a positive integer, got {a.num_joints!r}")
+    if a.loops.touch and a.held_shape is None:
+        raise ValueError(f"{OWNER}: loops.touch needs held_shape (the held object's pydrake.geometry shape)")
+    if a.fps is not None and not (isinstance(a.fps, numbers.Real) and a.fps > 0):
+        raise ValueError(f"{OWNER}: fps must be > 0 frames per second, got {a.fps!r}")
+    if a.plant is not None and a.hand_frame is None:
+        raise ValueError(f"{OWNER}: a plant needs its hand_frame")
+    if a.plant is None and not (a.hand_frame is None and a.sensor_frame is None and a.model_instance is None):
+        raise ValueError(f"{OWNER}: hand_frame, sensor_frame and model_instance need a plant")
+    if a.plant is not None:
+        instance = () if a.model_instance is None else (a.model_instance,)
+        positions = a.plant.num_positions(*instance)
+        if positions != a.num_joints:
+            raise ValueError(f"{OWNER}: the plant has {positions} positions for num_joints = {a.num_joints}")
+        if a.joint_ranges is None and a.loops.hand_eye:
+            a.joint_ranges = joint_ranges_from_limits(a.plant, a.model_instance)
+    if a.loops.hand_eye:
+        a.camera_info = camera_intrinsics(a.camera_info)
+    a.fps = DEFAULT_FPS if a.fps is None else float(a.fps)
+    a.motion_seed = 0 if a.motion_seed is None else a.motion_seed
+    a.hand_eye = a.hand_eye or HandEyeConfig()
+    a.body_detection = a.body_detection or BodyDetectionConfig()
+    a.kinesthetic = a.kinesthetic or KinestheticConfig()
+    return a
 
 
 def camera_intrinsics(camera, argument: str = "camera_info") -> CameraInfo:
@@ -81,82 +145,111 @@ def camera_intrinsics(camera, argument: str = "camera_info") -> CameraInfo:
                     f"{type(camera).__name__}")
 
 
-def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 30.0,
-                                  hand_eye: HandEyeConfig | None = None,
+def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops | None = None,
+                                  fps: float | None = None, hand_eye: HandEyeConfig | None = None,
                                   body_detection: BodyDetectionConfig | None = None,
                                   kinesthetic: KinestheticConfig | None = None,
                                   plant=None, hand_frame=None, sensor_frame=None, model_instance=None,
                                   held_shape=None, X_KG: RigidTransform | None = None,
-                                  joint_ranges=None, motion_seed: int = 0,
+                                  joint_ranges=None, motion_seed: int | None = None,
                                   ) -> Diagram:  # fmt: skip
-    """The sustainable coordination of an arm with ``num_joints`` joints, a depth camera with
-    intrinsics ``camera_info`` (a ``pydrake.systems.sensors.CameraInfo``, or a ``CameraConfig`` whose
-    intrinsics are taken, ``camera_intrinsics``; any other type raises ``TypeError``) at ``fps``
-    frames per second (not read from a ``CameraConfig``), and a wrist force/torque sensor. Settings
-    are the scenario sections' dataclasses (defaults if None). With ``plant`` (a finalized
-    MultibodyPlant of the arm) and ``hand_frame`` the hand pose (and the sensor pose, at
-    ``sensor_frame``, else the hand's) is computed from the joint positions
-    (``HandPoseFromPlant``); else it is the ``X_WH`` input and the sensor frame K is the hand frame
-    H. ``held_shape`` (the held object's ``pydrake.geometry`` shape at ``X_KG`` in K)
-    adds the touch estimator. ``joint_ranges`` (n x [lower, upper], rad) are the postures the
-    identifying motion may ask for (needed with ``hand_eye.identifying_motion_interval`` > 0, the
-    default; with a plant and no ranges, its position limits narrowed by ``RANGE_MARGIN``; its
-    draws come from ``motion_seed``).
+    """The sustainable coordination of an arm with ``num_joints`` joints, running the ``loops``
+    chosen (``Loops``: by default hand-eye and payload; a loop that is off has no systems and no
+    ports here). The hand-eye loop reads a depth camera with intrinsics ``camera_info`` (a
+    ``pydrake.systems.sensors.CameraInfo``, or a ``CameraConfig`` whose intrinsics are taken,
+    ``camera_intrinsics``; pass None with the hand-eye loop off) at ``fps`` frames per second (30 if
+    None; not read from a ``CameraConfig``); the payload loop a wrist force/torque sensor. Settings
+    are the scenario sections' dataclasses (defaults if None): ``hand_eye``, ``body_detection``,
+    ``joint_ranges`` and ``motion_seed`` are the hand-eye loop's, ``kinesthetic`` and
+    ``sensor_frame`` the payload loop's, ``held_shape`` and ``X_KG`` the touch loop's: one given
+    for a loop that is off, a wrong type, or no loop on raises a one-line ``ValueError`` or
+    ``TypeError`` naming the argument. With ``plant`` (a finalized MultibodyPlant of the arm) and
+    ``hand_frame`` the hand pose (and the sensor pose, at ``sensor_frame``, else the hand's) is
+    computed from the joint positions (``HandPoseFromPlant``); else it is the ``X_WH`` input and the
+    sensor frame K is the hand frame H. ``loops.touch`` adds the touch estimator on ``held_shape``
+    (the held object's ``pydrake.geometry`` shape at ``X_KG`` in K). ``joint_ranges`` (n x [lower,
+    upper], rad) are the postures the identifying motion may ask for (needed with
+    ``hand_eye.identifying_motion_interval`` > 0, the default; with a plant and no ranges, its
+    position limits narrowed by ``RANGE_MARGIN``; its draws come from ``motion_seed``, 0 if None).
 
     .. pydrake_system::
 
         name: SustainableCoordination
         input_ports:
-        - color_image
-        - depth_image
-        - image_time (optional)
-        - joint_positions
-        - joint_velocities
+        - color_image (with hand_eye)
+        - depth_image (with hand_eye)
+        - image_time (optional, with hand_eye)
+        - joint_positions (with hand_eye or plant)
+        - joint_velocities (with payload)
         - X_WH (without plant)
-        - wrench
+        - wrench (with payload)
         output_ports:
-        - X_WC
-        - p_HP
-        - hand_eye_mode
-        - hand_eye_events
-        - hand_eye_allowable_error
+        - X_WC (with hand_eye)
+        - X_WC_valid (with hand_eye)
+        - X_WC_sd (with hand_eye)
+        - p_HP (with hand_eye)
+        - p_HP_valid (with hand_eye)
+        - p_HP_sd (with hand_eye)
+        - followed_point (with hand_eye)
+        - followed_point_valid (with hand_eye)
+        - candidate_states (with hand_eye)
+        - hand_eye_mode (with hand_eye)
+        - hand_eye_events (with hand_eye)
+        - hand_eye_allowable_error (with hand_eye)
+        - hand_eye_reset_reason (with hand_eye)
         - camera_motion (with hand_eye.camera_motion.enabled)
-        - payload_mass
-        - p_KCm
-        - payload_mode
-        - payload_events
-        - touch (with held_shape)
-        - p_WP (with held_shape)
-        - f_env_W (with held_shape)
-        - motion_confirm
-        - hand_eye_pause
-        - payload_pause
+        - payload_mass (with payload)
+        - p_KCm (with payload)
+        - payload_valid (with payload)
+        - payload_sd (with payload)
+        - payload_mode (with payload)
+        - payload_events (with payload)
+        - payload_reset_reason (with payload)
+        - touch (with touch)
+        - p_WP (with touch)
+        - f_env_W (with touch)
+        - motion_confirm (with hand_eye)
+        - hand_eye_pause (with hand_eye)
+        - payload_pause (with payload)
         - X_WH_used
         - X_WK_used
 
     Inputs: ``color_image`` (ImageRgba8U), ``depth_image`` (ImageDepth32F, m), ``image_time`` (1, s,
     the capture time; unconnected: every frame is new), ``joint_positions`` and
-    ``joint_velocities`` (``num_joints``; velocities gate the quasi-static wrench samples),
-    ``X_WH`` (RigidTransform), ``wrench`` (6, ``[tau_K; f_K]`` applied by the wrist on the
-    outboard side, N m and N, in K; see ``identification.payload``).
+    ``joint_velocities`` (``num_joints``, rad and rad/s; velocities gate the quasi-static wrench
+    samples), ``X_WH`` (RigidTransform), ``wrench`` (6, ``[tau_K; f_K]`` applied by the wrist on the
+    outboard side, N m and N, in K; see ``identification.payload``). Every input but
+    ``image_time`` is required: one left unconnected stops the simulation's initialization with a
+    one-line ``RuntimeError`` naming the port and what to connect (``InputsConnected``).
 
-    Outputs: ``X_WC``, ``p_HP``, ``payload_mass``, ``p_KCm`` (adopted estimates, see
-    ``AdoptedEstimates``); ``hand_eye_mode`` and ``payload_mode`` (1: 0 identify, 1 observe);
-    ``*_events`` (the state machines' event lists); ``hand_eye_allowable_error`` (1, m^2);
-    ``camera_motion`` (2, ``[moving, moves]``: the camera noticed its own motion from the static
-    scene, ``CameraMotionDetector``; each new move is a hand-eye change detection);
-    the touch estimator's ``touch``, ``p_WP``, ``f_env_W``; for the user's motion generator
-    ``motion_confirm``, ``hand_eye_pause`` and ``payload_pause`` (below); ``X_WH_used``
-    and ``X_WK_used`` (the hand and sensor poses the loops use).
+    Outputs (``AdoptedEstimates``, ``FollowedPoint``): the estimates ``X_WC`` (RigidTransform, the
+    camera in the world), ``p_HP`` (3, m, the tool point in the hand frame), ``payload_mass`` (1,
+    kg), ``p_KCm`` (3, m, the payload's centre of mass in K), each beside its validity flag
+    (``X_WC_valid``, ``p_HP_valid``, ``payload_valid``: 1 when the estimate is one to use; at 0 the
+    value means nothing: the identity, zeros or a stale estimate, never NaN) and its 1-sd
+    uncertainty (``X_WC_sd``: 6, the camera's rotation about its x, y, z axes in rad, then its
+    position in m; ``p_HP_sd``: 3, m; ``payload_sd``: 4, kg then m; ``inf`` when not known);
+    ``followed_point`` (9, ``[feature_id, u, v, p_CP, p_HP]``: the tracked feature observed under
+    the adopted model, its pixel in px, its point in the camera frame and in the hand frame in m)
+    with ``followed_point_valid`` (1); ``candidate_states`` (``3 * hand_eye.candidates.max_candidates``:
+    per candidate ``[feature_id, num_samples, state]``, state 0 identifying, 1 converged, 2 leader,
+    -1 an empty slot); ``hand_eye_mode`` and ``payload_mode`` (1: 0 identify, 1 observe);
+    ``*_events`` (the state machines' event lists); ``*_reset_reason`` (1: why the loop last
+    identified again: 0 never, 1 an observation failed (the body changed: the tool slipped, the
+    payload changed), 2 the camera moved; ``coordination.RESET_REASON_NAMES``);
+    ``hand_eye_allowable_error`` (1, m^2); ``camera_motion`` (2, ``[moving, moves]``: the camera
+    noticed its own motion from the static scene, ``CameraMotionDetector``; each new move is a
+    hand-eye change detection); the touch estimator's ``touch``, ``p_WP``, ``f_env_W``; for the
+    user's motion generator ``motion_confirm``, ``hand_eye_pause`` and ``payload_pause`` (below);
+    ``X_WH_used`` and ``X_WK_used`` (the hand and sensor poses the loops use).
 
-    Which outputs mean something when: ``X_WC`` is the identity and ``p_HP`` zeros until the first
-    hand-eye convergence (a ``converged`` event, ``hand_eye_mode`` 1); from then on they are the
-    adopted camera and tool point. A camera move (a ``change_detected`` event "the camera moved")
-    drops them (identity and zeros again until the next convergence); a failed observation (a
-    ``change_detected`` event "... samples over the limit": the tool slipped) keeps the last adopted
-    ones while ``hand_eye_mode`` is 0 and the loop identifies again: use them while
-    ``hand_eye_mode`` is 1. ``hand_eye_allowable_error`` is 0 until the first convergence, then the
-    last adoption's. ``payload_mass`` and ``p_KCm`` are zeros until ``payload_mode`` first turns 1.
+    Which estimates mean something when: ``X_WC_valid`` is 1 from the first hand-eye convergence (a
+    ``converged`` event, ``hand_eye_mode`` 1) on; a camera move (a ``change_detected`` event "the
+    camera moved", ``hand_eye_reset_reason`` 2) drops the camera until the next convergence; a failed
+    observation (a ``change_detected`` event "... samples over the limit": the tool slipped,
+    ``hand_eye_reset_reason`` 1) keeps it. ``p_HP_valid`` and ``payload_valid`` are 1 while their
+    loop observes an adopted estimate (its mode 1). ``hand_eye_allowable_error`` is 0 until the first
+    convergence, then the last adoption's.
 
     The motion interface (``systems.motion_generator.MotionGenerator`` answers it;
     docs/on_your_robot.md). Each request is edge-triggered by its ``request_id``: it is new when the
@@ -179,81 +272,109 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, fps: float = 
       converged; brake smoothly, hold still for ``seconds`` (``coordination.pause_after_convergence``,
       3 s by default), then carry on.
     """
-    camera_info = camera_intrinsics(camera_info)
-    hand_eye = hand_eye or HandEyeConfig()
-    body_detection = body_detection or BodyDetectionConfig()
-    kinesthetic = kinesthetic or KinestheticConfig()
-    if plant is not None and hand_frame is None:
-        raise ValueError("make_sustainable_coordination: a plant needs its hand_frame")
-    if plant is None and not (hand_frame is None and sensor_frame is None and model_instance is None):
-        raise ValueError("make_sustainable_coordination: hand_frame, sensor_frame and model_instance "
-                         "need a plant")  # fmt: skip
-    if plant is not None:
-        positions = plant.num_positions() if model_instance is None else plant.num_positions(model_instance)
-        if positions != num_joints:
-            raise ValueError(f"make_sustainable_coordination: the plant has {positions} positions for "
-                             f"num_joints = {num_joints}")  # fmt: skip
-        if joint_ranges is None:
-            joint_ranges = joint_ranges_from_limits(plant, model_instance)
+    a = _checked(_Arguments(camera_info, num_joints, Loops() if loops is None else loops, fps, hand_eye,
+                            body_detection, kinesthetic, plant, hand_frame, sensor_frame, model_instance,
+                            held_shape, X_KG, joint_ranges, motion_seed))  # fmt: skip
     builder = DiagramBuilder()
-    try:
-        vision = add_hand_eye_loop(builder, camera_info, num_joints, fps, hand_eye, body_detection,
-                                   joint_ranges, motion_seed)  # fmt: skip
-    except ValueError as e:
-        raise ValueError(f"make_sustainable_coordination: {e}") from None
-    touch = add_payload_loop(builder, num_joints, kinesthetic, held_shape, X_KG)
-
-    for name in ("color_image", "depth_image", "image_time"):
-        first, *others = vision.image_inputs(name)
-        builder.ExportInput(first, name)
-        for port in others:
-            builder.ConnectInput(name, port)
-    first, *others = vision.actuator_inputs()
-    joint_positions = builder.ExportInput(first, "joint_positions")
-    for port in others:
-        builder.ConnectInput(joint_positions, port)
-    builder.ExportInput(touch.gate.GetInputPort("joint_velocities"), "joint_velocities")
-    if plant is not None:
-        fk = builder.AddSystem(HandPoseFromPlant(plant, hand_frame, sensor_frame, model_instance))
-        fk.set_name("hand_pose_from_plant")
-        builder.ConnectInput(joint_positions, fk.get_input_port())
-        X_WH, X_WK = fk.GetOutputPort("X_WH"), fk.GetOutputPort("X_WK")
-    else:
-        passthrough = builder.AddSystem(_PosePassThrough())
-        builder.ExportInput(passthrough.get_input_port(), "X_WH")
-        X_WH = X_WK = passthrough.get_output_port()
-    builder.Connect(X_WH, vision.candidates.GetInputPort("X_WH"))
-    consumers = [touch.identifier] + ([touch.estimator] if touch.estimator is not None else [])
-    wrench = [system.GetInputPort("wrench") for system in consumers]
-    builder.ExportInput(wrench[0], "wrench")
-    for port in wrench[1:]:
-        builder.ConnectInput("wrench", port)
-    for system in consumers:
-        builder.Connect(X_WK, system.GetInputPort("X_WK"))
-
-    adopted = builder.AddSystem(AdoptedEstimates())
-    adopted.set_name("adopted_estimates")
-    for prefix, machine in (("hand_eye", vision.state_machine), ("payload", touch.state_machine)):
-        builder.Connect(machine.GetOutputPort("adopted_solution"), adopted.GetInputPort(f"{prefix}_solution"))
-    for name in ("X_WC", "p_HP", "payload_mass", "p_KCm"):
-        builder.ExportOutput(adopted.GetOutputPort(name), name)
-    for prefix, machine in (("hand_eye", vision.state_machine), ("payload", touch.state_machine)):
-        builder.ExportOutput(machine.GetOutputPort("mode"), f"{prefix}_mode")
-        builder.ExportOutput(machine.GetOutputPort("events"), f"{prefix}_events")
-    builder.ExportOutput(vision.state_machine.GetOutputPort("allowable_error"), "hand_eye_allowable_error")
-    if vision.camera_motion is not None:
-        builder.ExportOutput(vision.camera_motion.GetOutputPort("camera_motion"), "camera_motion")
-    if touch.estimator is not None:
-        for name in ("touch", "p_WP", "f_env_W"):
-            builder.ExportOutput(touch.estimator.GetOutputPort(name), name)
-    builder.ExportOutput(vision.motion_confirm(), "motion_confirm")
-    builder.ExportOutput(vision.state_machine.GetOutputPort("pause"), "hand_eye_pause")
-    builder.ExportOutput(touch.state_machine.GetOutputPort("pause"), "payload_pause")
+    inputs = {name: [] for name in _INPUTS}
+    check = builder.AddSystem(InputsConnected(OWNER, _required_inputs(a)))
+    check.set_name("inputs_connected")
+    for i in range(check.num_input_ports()):
+        inputs[check.get_input_port(i).get_name()].append(check.get_input_port(i))
+    vision = payload = None
+    if a.loops.hand_eye:
+        try:
+            vision = add_hand_eye_loop(builder, a.camera_info, a.num_joints, a.fps, a.hand_eye,
+                                       a.body_detection, a.joint_ranges, a.motion_seed)  # fmt: skip
+        except ValueError as e:
+            raise ValueError(f"{OWNER}: {e}") from None
+        for name in ("color_image", "depth_image", "image_time"):
+            inputs[name] += vision.image_inputs(name)
+        inputs["joint_positions"] += vision.actuator_inputs()
+    if a.loops.payload:
+        shape = a.held_shape if a.loops.touch else None
+        payload = add_payload_loop(builder, a.num_joints, a.kinesthetic, shape, a.X_KG)
+        inputs["joint_velocities"].append(payload.gate.GetInputPort("joint_velocities"))
+    X_WH, X_WK = _hand_poses(builder, a, inputs)
+    if vision is not None:
+        builder.Connect(X_WH, vision.candidates.GetInputPort("X_WH"))
+    if payload is not None:
+        for system in (payload.identifier, payload.estimator):
+            if system is not None:
+                inputs["wrench"].append(system.GetInputPort("wrench"))
+                builder.Connect(X_WK, system.GetInputPort("X_WK"))
+    for name, ports in inputs.items():
+        _export_input(builder, name, ports)
+    _export_outputs(builder, vision, payload)
     builder.ExportOutput(X_WH, "X_WH_used")
     builder.ExportOutput(X_WK, "X_WK_used")
     diagram = builder.Build()
     diagram.set_name("sustainable_coordination")
     return diagram
+
+
+def _required_inputs(a: _Arguments) -> tuple[RequiredInput, ...]:
+    """The inputs the diagram of ``a`` needs connected (every one but ``image_time``)."""
+    models = {"color_image": AbstractValue.Make(ImageRgba8U()),
+              "depth_image": AbstractValue.Make(ImageDepth32F()),
+              "joint_positions": a.num_joints, "joint_velocities": a.num_joints,
+              "X_WH": AbstractValue.Make(RigidTransform()), "wrench": 6}  # fmt: skip
+    needed = {"color_image": a.loops.hand_eye, "depth_image": a.loops.hand_eye,
+              "joint_positions": a.loops.hand_eye or a.plant is not None,
+              "joint_velocities": a.loops.payload, "X_WH": a.plant is None, "wrench": a.loops.payload}
+    return tuple(RequiredInput(name, models[name], _ADVICE[name].format(n=a.num_joints))
+                 for name in _INPUTS if needed.get(name, False))
+
+
+def _hand_poses(builder, a: _Arguments, inputs: dict) -> tuple:
+    """The output ports of the hand and sensor poses: the plant's forward kinematics of the joint
+    positions, or the ``X_WH`` input for both."""
+    if a.plant is not None:
+        fk = builder.AddSystem(HandPoseFromPlant(a.plant, a.hand_frame, a.sensor_frame, a.model_instance))
+        fk.set_name("hand_pose_from_plant")
+        inputs["joint_positions"].append(fk.get_input_port())
+        return fk.GetOutputPort("X_WH"), fk.GetOutputPort("X_WK")
+    passthrough = builder.AddSystem(_PosePassThrough())
+    inputs["X_WH"].append(passthrough.get_input_port())
+    return passthrough.get_output_port(), passthrough.get_output_port()
+
+
+def _export_input(builder, name: str, ports: list) -> None:
+    """Exports ``ports`` (all that take it) as the diagram's input ``name``; none: no such input."""
+    if ports:
+        first, *others = ports
+        builder.ExportInput(first, name)
+        for port in others:
+            builder.ConnectInput(name, port)
+
+
+def _export_outputs(builder, vision, payload) -> None:
+    """The loops' outputs (see ``make_sustainable_coordination``), in the documented order."""
+    inspection = add_inspection(builder, vision, payload)
+    adopted, followed = inspection.adopted, inspection.followed
+    if vision is not None:
+        machine = vision.state_machine
+        for name in ("X_WC", "X_WC_valid", "X_WC_sd", "p_HP", "p_HP_valid", "p_HP_sd"):
+            builder.ExportOutput(adopted.GetOutputPort(name), name)
+        for name in ("followed_point", "followed_point_valid", "candidate_states"):
+            builder.ExportOutput(followed.GetOutputPort(name), name)
+        for name in ("mode", "events", "allowable_error", "reset_reason"):
+            builder.ExportOutput(machine.GetOutputPort(name), f"hand_eye_{name}")
+        if vision.camera_motion is not None:
+            builder.ExportOutput(vision.camera_motion.GetOutputPort("camera_motion"), "camera_motion")
+    if payload is not None:
+        for name in ("payload_mass", "p_KCm", "payload_valid", "payload_sd"):
+            builder.ExportOutput(adopted.GetOutputPort(name), name)
+        for name in ("mode", "events", "reset_reason"):
+            builder.ExportOutput(payload.state_machine.GetOutputPort(name), f"payload_{name}")
+        if payload.estimator is not None:
+            for name in ("touch", "p_WP", "f_env_W"):
+                builder.ExportOutput(payload.estimator.GetOutputPort(name), name)
+    if vision is not None:
+        builder.ExportOutput(vision.motion_confirm(), "motion_confirm")
+        builder.ExportOutput(vision.state_machine.GetOutputPort("pause"), "hand_eye_pause")
+    if payload is not None:
+        builder.ExportOutput(payload.state_machine.GetOutputPort("pause"), "payload_pause")
 
 
 # Fraction of a joint's limit range kept clear at each end when the ranges come from the limits:

@@ -153,6 +153,11 @@ class HandEyeLoop:
             ports.append(self.identifying_motion.GetInputPort("joint_positions"))
         return ports
 
+    def candidate_features(self):
+        """The output port of the tracked features the candidates are fed (the refiner's, else the
+        tracker's)."""
+        return (self.refiner or self.tracker).GetOutputPort("tracked_features")
+
     def motion_confirm(self):
         """The output port the motion generator's confirming requests come from: the detector's
         ``confirm`` (paper §3.3), through the identifying motion when there is one."""

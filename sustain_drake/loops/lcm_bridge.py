@@ -20,7 +20,10 @@ LCM_OUTPUT_CHANNELS = {
     "hand_eye_pause": "SUSTAIN_HAND_EYE_PAUSE", "motion_confirm": "SUSTAIN_MOTION_CONFIRM",
     "payload_mass": "SUSTAIN_PAYLOAD_MASS", "p_KCm": "SUSTAIN_P_KCM", "payload_mode": "SUSTAIN_PAYLOAD_MODE",
     "payload_pause": "SUSTAIN_PAYLOAD_PAUSE", "touch": "SUSTAIN_TOUCH", "p_WP": "SUSTAIN_P_WP",
-    "f_env_W": "SUSTAIN_F_ENV_W",
+    "f_env_W": "SUSTAIN_F_ENV_W", "X_WC_valid": "SUSTAIN_X_WC_VALID", "p_HP_valid": "SUSTAIN_P_HP_VALID",
+    "payload_valid": "SUSTAIN_PAYLOAD_VALID", "X_WC_sd": "SUSTAIN_X_WC_SD", "p_HP_sd": "SUSTAIN_P_HP_SD",
+    "payload_sd": "SUSTAIN_PAYLOAD_SD", "followed_point": "SUSTAIN_FOLLOWED_POINT",
+    "followed_point_valid": "SUSTAIN_FOLLOWED_POINT_VALID",
 }  # fmt: skip
 
 
@@ -38,7 +41,8 @@ def make_lcm_bridge(lcm, camera_info, num_joints: int, *, plant, hand_frame, pub
     ``ForceTorqueToWrench``), ``images`` ``lcmt_image_array`` (a color and a depth image, as
     ``ImageToLcmImageArrayT`` writes them; decoded by ``LcmImageArrayToImages``; ``header.utime``
     is the capture time). The hand and sensor poses come from ``plant`` and ``hand_frame``
-    (``sensor_frame`` etc. go to ``make_sustainable_coordination`` in ``coordination_kwargs``).
+    (``sensor_frame``, ``loops`` etc. go to ``make_sustainable_coordination`` in
+    ``coordination_kwargs``); the channels of a loop that is off are neither read nor published.
 
     Publishes every ``publish_period`` s, as ``lcmt_scope`` (Drake's vector message; channels
     ``LCM_OUTPUT_CHANNELS`` updated by ``output_channels``) the vector outputs of the
@@ -59,26 +63,32 @@ def make_lcm_bridge(lcm, camera_info, num_joints: int, *, plant, hand_frame, pub
         sub.set_name(f"lcm_subscriber_{key}{suffix}")
         return sub.get_output_port()
 
+    def connect(port, name):  # a loop that is off has no such input: its sensor is not read
+        if coordination.HasInputPort(name):
+            builder.Connect(port, coordination.GetInputPort(name))
+
     status = builder.AddSystem(IiwaStatusReceiver(num_joints))
     builder.Connect(subscribe("status", lcmt_iiwa_status, True), status.get_input_port())
-    builder.Connect(status.GetOutputPort("position_measured"), coordination.GetInputPort("joint_positions"))
-    builder.Connect(status.GetOutputPort("velocity_estimated"), coordination.GetInputPort("joint_velocities"))
-    wrench = builder.AddSystem(ForceTorqueToWrench(wrench_sign))
-    builder.Connect(subscribe("force_torque", lcmt_force_torque, False), wrench.get_input_port())
-    builder.Connect(wrench.get_output_port(), coordination.GetInputPort("wrench"))
-    images = builder.AddSystem(LcmImageArrayToImages())
-    images.set_name("lcm_image_array_to_images")
-    builder.Connect(subscribe("images", lcmt_image_array, True), images.get_input_port())
-    for name in ("color_image", "depth_image"):
-        builder.Connect(images.GetOutputPort(name), coordination.GetInputPort(name))
-    # The C++ message is opaque to Python: a second (Python) subscription reads the capture time.
-    image_time = builder.AddSystem(ImageArrayTime())
-    builder.Connect(subscribe("images", lcmt_image_array, False, "_time"), image_time.get_input_port())
-    builder.Connect(image_time.get_output_port(), coordination.GetInputPort("image_time"))
+    connect(status.GetOutputPort("position_measured"), "joint_positions")
+    connect(status.GetOutputPort("velocity_estimated"), "joint_velocities")
+    if coordination.HasInputPort("wrench"):
+        wrench = builder.AddSystem(ForceTorqueToWrench(wrench_sign))
+        builder.Connect(subscribe("force_torque", lcmt_force_torque, False), wrench.get_input_port())
+        connect(wrench.get_output_port(), "wrench")
+    if coordination.HasInputPort("color_image"):
+        images = builder.AddSystem(LcmImageArrayToImages())
+        images.set_name("lcm_image_array_to_images")
+        builder.Connect(subscribe("images", lcmt_image_array, True), images.get_input_port())
+        for name in ("color_image", "depth_image"):
+            connect(images.GetOutputPort(name), name)
+        # The C++ message is opaque to Python: a second (Python) subscription reads the capture time.
+        image_time = builder.AddSystem(ImageArrayTime())
+        builder.Connect(subscribe("images", lcmt_image_array, False, "_time"), image_time.get_input_port())
+        connect(image_time.get_output_port(), "image_time")
 
     for key, channel in outputs.items():
         if not coordination.HasOutputPort(key):
-            continue  # the touch outputs exist only with a held shape
+            continue  # the outputs of a loop that is off
         port = coordination.GetOutputPort(key)
         if key == "X_WC":
             matrix = builder.AddSystem(PoseToVector())

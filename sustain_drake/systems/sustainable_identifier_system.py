@@ -7,6 +7,7 @@ context, so contexts can be cloned and simulations run in parallel.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -14,7 +15,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from sustain_drake.identification import eye_to_hand, payload
+from sustain_drake.identification import eye_to_hand, observability, payload
 from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, SustainableIdentifier
 
 
@@ -125,7 +126,14 @@ class PayloadFormulation:
         return payload.build_A(sample[0], sample[1], self.gravity_W)
 
     def solve(self, identifier):
-        return identifier.solve()
+        """The identifier's solution, with its covariance attached when converged (the adopted
+        payload's uncertainty, ``observability.payload_covariance``)."""
+        solution = identifier.solve()
+        if not solution.verdict.converged:
+            return solution
+        core = identifier.core
+        covariance = observability.payload_covariance(core.S_view, core.weight, solution.x, self.gravity_W)
+        return dataclasses.replace(solution, covariance=covariance)
 
     def declare_outputs(self, system: LeafSystem, solution_of) -> None:
         system.DeclareVectorOutputPort(
