@@ -11,6 +11,7 @@ from sustain_drake.perception.point_refinement import (
     RefinementParams,
     _row_nanmedian,
     central_symmetry,
+    fixed_on_surface,
     local_depth,
     refine_pixels,
     refine_points,
@@ -256,6 +257,29 @@ def test_view_shift_keeps_saddles_and_clean_corners_and_rejects_edges_arcs_and_f
     assert np.all(view_shift(flat, np.array([[70.0, 50.0]]), 4) == np.inf)
     assert np.all(view_shift(gray, np.array([[2.0, 2.0], [np.nan, 5.0]]), 4) == np.inf)
     assert view_shift(gray, np.zeros((0, 2)), 4).shape == (0,)
+
+
+def test_the_view_shift_gate_is_relative_to_the_depth_noise_at_the_point():
+    square = square_image()
+    params = RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3,
+                              max_view_shift_sigmas=1.0)
+    corner, _ = refine_pixels(square, np.array([[61.0, 41.2]]), params)
+    on_edge = np.array([[60.3, 47.0]])
+    points, z = np.vstack([corner, on_edge]), np.array([0.8, 0.8])
+    # The L corner moves ~0.2 px (~1.2 mm at 0.8 m with f = 145 px) under a 45 deg tilt: within a
+    # noise of 2 mm, beyond one of 0.5 mm; the point on the edge slides along it under any noise.
+    assert fixed_on_surface(square, points, z, K.fx, params, lambda z: np.full_like(z, 0.002)).tolist() \
+        == [True, False]
+    assert not fixed_on_surface(square, points, z, K.fx, params, lambda z: np.full_like(z, 0.0005)).any()
+    # A saddle is kept by its symmetry whatever the noise.
+    gray = cv2.cvtColor(checker_image(), cv2.COLOR_RGBA2GRAY)
+    assert fixed_on_surface(gray, np.array([SADDLE]), z[:1], K.fx, params, lambda z: 0.0 * z).all()
+    depth = np.full((K.height, K.width), 0.8, np.float32)
+    with pytest.raises(ValueError, match="depth_sigma"):
+        refine_points(square, depth, corner, K, params)
+    _, valid = refine_points(square, depth, np.vstack([corner, on_edge]), K, params,
+                             depth_sigma=lambda z: np.full_like(z, 0.002))
+    assert valid.tolist() == [True, False]
 
 
 def _print_texture(rng, n):

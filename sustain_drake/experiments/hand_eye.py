@@ -18,6 +18,7 @@ plots.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 from dataclasses import dataclass
@@ -40,6 +41,7 @@ from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_o
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
+from sustain_drake.systems.depth_noise import DepthNoiseModel
 from sustain_drake.systems.ground_truth import PoseToVector
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
@@ -68,6 +70,9 @@ def build_loop(builder, station, scenario):
     detector) wired to ``station`` (its image, encoder, ``X_WH`` outputs and
     ``motion_confirm``/``motion_pause`` inputs). Returns the ``HandEyeLoop``."""
     config, perception = scenario.hand_eye, scenario.body_detection
+    if scenario.depth_noise.enabled:  # the loop's sensor model is the station's depth noise
+        noise = scenario.depth_noise
+        config = dataclasses.replace(config, depth_noise=DepthNoiseModel(noise.a, noise.b, noise.z0))
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("depth_image")):
         raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
     try:

@@ -18,6 +18,7 @@ from sustain_drake.perception.point_refinement import RefinementParams
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers, FeatureRefiner
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
+from sustain_drake.systems.depth_noise import DepthNoiseModel
 from sustain_drake.systems.identifying_motion import IdentifyingMotion
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
@@ -93,9 +94,11 @@ def measured_candidates() -> CandidateParams:
 
 def measured_refinement() -> RefinementParams:
     """The FeatureRefiner's settings the results were measured with: cornerSubPix with a 9 x 9
-    window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it), only centrally symmetric
-    points, the depth on the face's fitted plane (docs/hand_eye.md, "Points")."""
-    return RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3, depth_plane=True)
+    window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it), only points fixed on their
+    face (centrally symmetric, or moved by a 45 deg tilt by at most the depth noise at their depth),
+    the depth on the face's fitted plane (docs/hand_eye.md, "The points")."""
+    return RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3, depth_plane=True,
+                            max_view_shift_sigmas=1.0)
 
 
 @dataclasses.dataclass
@@ -125,6 +128,9 @@ class HandEyeConfig:
     refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
     # the FeatureRefiner's thresholds (measured_refinement)
     refinement: RefinementParams = field(default_factory=measured_refinement)
+    # the depth camera's noise sigma(z) (m), the sensor's model, not a setting of the method: the
+    # refiner's view-shift gate is relative to it (a simulated station passes its own)
+    depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)
     false_alarm_window: float = 2.0  # s; a detection with no disturbance this long before is a false alarm
     log_rate: float = 30.0  # samples per second of the logged signals (plots, metrics)
 
@@ -207,7 +213,7 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     machine.set_name("coordination_state_machine")
     features, refiner = tracker.GetOutputPort("tracked_features"), None
     if hand_eye.refine_points:  # drift-free points for the identifiers (the detector keeps the tracks)
-        refiner = builder.AddSystem(FeatureRefiner(info, refinement))
+        refiner = builder.AddSystem(FeatureRefiner(info, refinement, hand_eye.depth_noise))
         refiner.set_name("feature_refiner")
         builder.Connect(features, refiner.GetInputPort("tracked_features"))
         features = refiner.GetOutputPort("tracked_features")

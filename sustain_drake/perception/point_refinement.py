@@ -65,9 +65,10 @@ class RefinementParams:
     symmetry_window_px: int = 0
     # least correlation of the window with itself turned 180 deg (1: symmetric, -1: a straight edge)
     min_symmetry: float = 0.5
-    # m: a point that moves farther than this on its face when the face tilts by 45 deg (view_shift,
-    # times the depth over the focal length) is not fixed on the hand, unless centrally symmetric; 0: off
-    max_view_shift: float = 0.0
+    # a point that moves on its face, when the face tilts by 45 deg (view_shift, times the depth over
+    # the focal length), farther than this many depth-noise sigmas at its depth is not fixed on the
+    # hand, unless centrally symmetric (the symmetry test alone then lets no other point in); 0: off
+    max_view_shift_sigmas: float = 0.0
 
     def __post_init__(self):
         if not -1.0 <= self.min_symmetry <= 1.0:
@@ -75,8 +76,8 @@ class RefinementParams:
         if (self.corner_window_px < 0 or self.depth_window_px < 0 or self.blob_window_px < 0
                 or self.symmetry_window_px < 0):
             raise ValueError(f"window sizes must be >= 0 ({self})")
-        if not self.max_view_shift >= 0:
-            raise ValueError(f"max_view_shift must be >= 0 ({self})")
+        if not self.max_view_shift_sigmas >= 0:
+            raise ValueError(f"max_view_shift_sigmas must be >= 0 ({self})")
         if not 0 < self.max_incidence_deg <= 90:
             raise ValueError(f"max_incidence_deg must be in (0, 90] ({self})")
         if not (self.max_shift_px > 0 and self.surface_tolerance > 0 and 0 < self.min_fraction <= 1):
@@ -107,17 +108,20 @@ def refine_pixels(gray: np.ndarray, p_px: np.ndarray, params: RefinementParams):
         refined = np.where(is_blob[:, None], centres, refined)
     ok &= np.isfinite(refined).all(axis=1)
     ok &= np.linalg.norm(refined - p, axis=1) <= params.max_shift_px
-    if params.symmetry_window_px > 0 and params.max_view_shift == 0 and ok.any():
+    if params.symmetry_window_px > 0 and params.max_view_shift_sigmas == 0 and ok.any():
         ok[ok] = central_symmetry(gray, refined[ok], params.symmetry_window_px) >= params.min_symmetry
     return refined, ok
 
 
 def fixed_on_surface(gray: np.ndarray, p_px: np.ndarray, z: np.ndarray, focal_px: float,
-                     params: RefinementParams) -> np.ndarray:
+                     params: RefinementParams, depth_sigma) -> np.ndarray:
     """Which refined points (K x 2 px, at depths ``z`` m) stay on the same surface point as the view
     changes (K,): the centrally symmetric ones (``symmetry_window_px``, ``min_symmetry``), and those
-    that a 45 deg tilt of their face moves by at most ``max_view_shift`` on it (``view_shift``, px,
-    times ``z`` over the focal length: a pixel spans ``z / f`` metres of a face seen head-on)."""
+    that a 45 deg tilt of their face moves on it by at most ``max_view_shift_sigmas`` times the
+    depth noise ``depth_sigma(z)`` (m, the sensor model) at their depth (``view_shift``, px, times
+    ``z`` over the focal length: a pixel spans ``z / f`` metres of a face seen head-on). A bias
+    within the noise of each sample is one the identification cannot tell from that noise; a
+    tighter gate keeps too few points on a tool without a checker."""
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
     fixed = np.zeros(p.shape[0], bool)
     if p.shape[0] == 0:
@@ -127,7 +131,7 @@ def fixed_on_surface(gray: np.ndarray, p_px: np.ndarray, z: np.ndarray, focal_px
     rest = np.flatnonzero(~fixed)
     if rest.size:
         shift = view_shift(gray, p[rest], params.corner_window_px) * np.asarray(z, float)[rest] / focal_px
-        fixed[rest] = shift <= params.max_view_shift
+        fixed[rest] = shift <= params.max_view_shift_sigmas * depth_sigma(np.asarray(z, float)[rest])
     return fixed
 
 
@@ -361,11 +365,13 @@ def incidence(coef: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics)
 
 
 def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
-                  params: RefinementParams | None = None, return_pixels: bool = False):
+                  params: RefinementParams | None = None, return_pixels: bool = False, depth_sigma=None):
     """``(p_CP, valid)`` (K x 3 in m, K) for tracked pixels ``p_px``: the sub-pixel corner near each
     and the robust depth there, back-projected with the pinhole model (and the refined pixels,
-    K x 2, third, if ``return_pixels``). A point without a corner nearby or without a clean depth
-    is not valid (a zero row, never NaN; its pixel is the tracked one)."""
+    K x 2, third, if ``return_pixels``). A point without a corner nearby, without a clean depth, or
+    (with ``max_view_shift_sigmas``) not fixed on its surface (``fixed_on_surface``, with the depth
+    noise ``depth_sigma(z)`` in m, required then) is not valid (a zero row, never NaN; its pixel is
+    the tracked one)."""
     params = RefinementParams() if params is None else params
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
     if p.shape[0] == 0 or np.size(image) == 0 or np.size(depth) == 0:
@@ -375,8 +381,10 @@ def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrin
     refined, ok = refine_pixels(gray, p, params)
     z = local_depth(depth, refined, params, intrinsics)
     ok &= np.isfinite(z) & (z > 0)
-    if params.max_view_shift > 0 and ok.any():
-        ok[ok] = fixed_on_surface(gray, refined[ok], z[ok], intrinsics.fx, params)
+    if params.max_view_shift_sigmas > 0 and ok.any():
+        if depth_sigma is None:
+            raise ValueError("refine_points: max_view_shift_sigmas needs the depth noise depth_sigma(z)")
+        ok[ok] = fixed_on_surface(gray, refined[ok], z[ok], intrinsics.fx, params, depth_sigma)
     p_CP = np.zeros((p.shape[0], 3))
     p_CP[ok] = pinhole_points(refined[ok], z[ok], intrinsics)  # with the robust depth
     if return_pixels:

@@ -40,6 +40,7 @@ from sustain_drake.station.scenario import (
     one_line,
 )
 from sustain_drake.station.scenario_yaml import schema_fields, shown
+from sustain_drake.systems.depth_noise import DepthNoiseModel
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,6 +139,7 @@ RANGES: dict[type, dict[str, Range]] = {
         "rate": _above(0, 10_000, "Hz"), "force_noise": _from(0, 100, "N"),
         "torque_noise": _from(0, 10, "N m"), "bias": _from(-1000, 1000, "N m or N"), "seed": SEED,
     },
+    DepthNoiseModel: {"a": _from(0, 1, "m"), "b": _from(0, 1, "1/m"), "z0": _from(0, 100, "m")},
     DepthNoiseConfig: {"a": _from(0, 1, "m"), "b": _from(0, 1, "1/m"), "z0": _from(0, 100, "m"),
                        "seed": SEED},
     DistractorConfig: {"waypoints": _from(-50, 50, "m"), "speed": _above(0, 10, "m/s"),
@@ -214,7 +216,7 @@ RANGES: dict[type, dict[str, Range]] = {
         "depth_window_px": _from(0, 50), "surface_tolerance": _above(0, 1, "m"),
         "min_fraction": _above(0, 1), "blob_window_px": _from(0, 50),
         "max_incidence_deg": _above(0, 90, "deg"), "symmetry_window_px": _from(0, 50),
-        "min_symmetry": _from(-1, 1), "max_view_shift": _from(0, 0.1, "m"),
+        "min_symmetry": _from(-1, 1), "max_view_shift_sigmas": _from(0, 100),
     },
     KinestheticConfig: {"period": _from(1e-4, 1, "s"), "min_touch_force": _from(0, 1000, "N"),
                         "eval_min_force": _from(0, 1000, "N")},

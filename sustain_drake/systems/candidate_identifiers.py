@@ -20,6 +20,7 @@ from sustain_drake.perception.camera_motion import SceneTurn
 from sustain_drake.perception.free_space import depth_gap
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.perception.point_refinement import RefinementParams, refine_points
+from sustain_drake.systems.depth_noise import DepthNoiseModel
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
 from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
 from sustain_drake.systems.shared_state import Shared
@@ -47,14 +48,17 @@ class FeatureRefiner(LeafSystem):
     ``tracked_features`` out is the input with ``p_px``, ``p_CP`` and ``valid`` replaced (same ids
     and order, so a detector's body flags still match). The images must be the frame the features
     come from: when ``image_time`` (connected) differs from the features' ``time``, every feature is
-    invalid for that evaluation (no point is better than a point from another frame). No state:
-    the output is a function of the inputs.
+    invalid for that evaluation (no point is better than a point from another frame). ``depth_noise``
+    is the depth camera's noise model (``DepthNoiseModel``, its default if None), which
+    ``params.max_view_shift_sigmas`` is relative to. No state: the output is a function of the inputs.
     """
 
-    def __init__(self, camera_info: CameraInfo, params: RefinementParams | None = None):
+    def __init__(self, camera_info: CameraInfo, params: RefinementParams | None = None,
+                 depth_noise: DepthNoiseModel | None = None):
         super().__init__()
         self._intrinsics = intrinsics_from_camera_info(camera_info)
         self._params = params or RefinementParams()
+        self._depth_noise = depth_noise or DepthNoiseModel()
         self._features = self.DeclareAbstractInputPort(
             "tracked_features", AbstractValue.Make(TrackedFeatures()))
         self._color = self.DeclareAbstractInputPort("color_image", AbstractValue.Make(ImageRgba8U()))
@@ -75,8 +79,8 @@ class FeatureRefiner(LeafSystem):
         if len(features) == 0 or not (same_frame and shape_ok):
             p_CP, valid, p_px = np.zeros((len(features), 3)), np.zeros(len(features), bool), features.p_px
         else:
-            p_CP, valid, p_px = refine_points(color, depth, features.p_px, self._intrinsics,
-                                              self._params, return_pixels=True)
+            p_CP, valid, p_px = refine_points(color, depth, features.p_px, self._intrinsics, self._params,
+                                              return_pixels=True, depth_sigma=self._depth_noise.sigma)
         output.set_value(dataclasses.replace(features, p_px=p_px, p_CP=p_CP, valid=valid))
 
 
