@@ -24,6 +24,7 @@ from sustain_drake.station import build_station, load_scenario
 from sustain_drake.station.scenario import HeadMove, ToolSlip
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
+from sustain_drake.systems.depth_noise import DepthNoiseModel
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
 from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation
 
@@ -152,6 +153,21 @@ def test_images_to_first_convergence():
 
     rms = np.sqrt(own_fit(statistic, R, p)[1])
     assert rms < 5e-3
+
+
+def test_the_refiner_gates_points_against_the_stations_own_depth_noise():
+    """The view-shift gate is relative to the depth camera's noise model: the scenario's, when its
+    noise is on; the loop's default sensor model when it is off."""
+    scenario = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
+    scenario.depth_noise.a, scenario.depth_noise.b, scenario.depth_noise.z0 = 0.003, 0.004, 0.5
+    for enabled, expected in ((True, DepthNoiseModel(0.003, 0.004, 0.5)), (False, DepthNoiseModel())):
+        scenario.depth_noise.enabled = enabled
+        builder = DiagramBuilder()
+        station = builder.AddSystem(build_station(scenario))
+        hand_eye.add_to_diagram(builder, station, scenario, None)
+        refiner = builder.Build().GetSubsystemByName("feature_refiner")
+        assert refiner.depth_noise == expected
+        assert refiner.params.max_view_shift_sigmas == 1.0
 
 
 def test_a_cloned_context_keeps_its_own_tracker_and_candidate_states():

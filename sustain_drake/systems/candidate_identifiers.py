@@ -71,6 +71,10 @@ class FeatureRefiner(LeafSystem):
     def params(self) -> RefinementParams:
         return self._params
 
+    @property
+    def depth_noise(self) -> DepthNoiseModel:
+        return self._depth_noise
+
     def _calc(self, context, output) -> None:
         features = self._features.Eval(context)
         same_frame = _same_frame(self._time, context, features.time)
