@@ -63,10 +63,11 @@ def log_bytes(simulator) -> int:
 
 class MemoryMonitor:
     """``simulate_scenario``'s ``on_step``: the resident memory and the logs' size every
-    ``every`` simulated seconds (reads only)."""
+    ``every`` simulated seconds (reads only), written to ``path`` as they come (a run stopped early
+    keeps its samples so far) and printed as progress."""
 
-    def __init__(self, every: float):
-        self.every, self.next, self.samples = every, every, []
+    def __init__(self, every: float, path: Path):
+        self.every, self.next, self.samples, self.path = every, every, [], path
         self.start = time.perf_counter()
 
     def __call__(self, t: float, simulator) -> None:
@@ -75,6 +76,15 @@ class MemoryMonitor:
         self.next += self.every
         self.samples.append({"time_s": round(t, 6), "wall_s": time.perf_counter() - self.start,
                              "rss_mb": resident_bytes() / 1e6, "logs_mb": log_bytes(simulator) / 1e6})
+        self.write()
+        s = self.samples[-1]
+        print(f"{t:.0f} sim s in {s['wall_s']:.0f} wall s: resident {s['rss_mb']:.0f} MB, logs "
+              f"{s['logs_mb']:.1f} MB", flush=True)
+
+    def write(self, wall: float | None = None) -> None:
+        data = {"every_s": self.every, "samples": self.samples,
+                "wall_s": time.perf_counter() - self.start if wall is None else wall}
+        write_atomically(self.path, json.dumps(data, indent=2) + "\n")
 
 
 def run(args) -> None:
@@ -82,11 +92,10 @@ def run(args) -> None:
     from sustain_drake.experiments.run import simulate_scenario
 
     scenario = load_scenario(args.scenario)
-    monitor = MemoryMonitor(MEMORY_EVERY_S)
+    monitor = MemoryMonitor(MEMORY_EVERY_S, args.out / "memory.json")
     result = simulate_scenario(scenario, args.out, label=f"{args.scenario.name}:soak", duration=args.duration,
                                log_rate=LOG_RATE_HZ, replay=False, on_step=monitor)
-    write_atomically(args.out / "memory.json", json.dumps(
-        {"every_s": MEMORY_EVERY_S, "samples": monitor.samples, "wall_s": result.wall}, indent=2) + "\n")
+    monitor.write(result.wall)
 
 
 def _fmt(value, spec: str = ".2f") -> str:

@@ -5,6 +5,7 @@ interval; bad values are one-line errors; ``diagrams/soak.yaml`` loads and cover
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 
 from sustain_drake.experiments import hand_eye_metrics as m
+from sustain_drake.experiments.run import simulate_scenario
 from sustain_drake.experiments.targets import target_bound
 from sustain_drake.station import ScenarioError, load_scenario
 from sustain_drake.station.random_disturbances import (
@@ -147,3 +149,14 @@ def test_the_adopted_camera_after_each_reconvergence():
     assert after[0] == {"time_s": 130.0, "camera_position_error_mm": 3.0, "camera_rotation_error_deg": 0.3,
                         "tool_point_error_mm": 1.0}
     assert after[1] is None
+
+
+def test_the_soak_builds_and_lists_its_drawn_disturbances(tmp_path):
+    """A 0.1 s run of the soak's whole diagram: the station plays the drawn timeline and the metrics
+    list each of its disturbances (none happened yet)."""
+    s = load_scenario(SOAK)
+    simulate_scenario(s, tmp_path, duration=0.1, log_rate=10.0, replay=False)
+    listed = json.loads((tmp_path / "metrics.json").read_text())["hand_eye"]["disturbances"]
+    assert [(d["kind"], d["time_s"]) for d in listed] == [
+        ("head_move" if isinstance(e, HeadMove) else "tool_slip", e.time) for e in timeline(s)]
+    assert all(d["detected_s"] is None and d["adopted_after"] is None for d in listed)
