@@ -33,7 +33,9 @@ class RandomDisturbances:
     ``diagrams/soak.yaml``); each is a change from the state before it, kept within limits."""
 
     enabled: bool = False  # draw the disturbances (added to the timeline of ``disturbances``)
-    seed: int = 0  # seed of the draw: times, kinds, sizes and signs (any integer >= 0)
+    # seed of the draw: times, kinds, sizes and signs (any integer >= 0; simulate --seed and a
+    # sweep's seed axis leave it: sweep random_disturbances.seed to vary the draw)
+    seed: int = 0
     start_time: float = 120.0  # s: the first disturbance
     # s: [min, max] time from one disturbance to the next, drawn uniformly; min at least 16 s (the
     # detection and re-convergence targets), and the last one at least 16 s before the run ends

@@ -281,8 +281,8 @@ class Scenario:
     lights: list[LightParameter] = field(default_factory=list)
     # timeline of tool slips, head moves and touches
     disturbances: list[ToolSlip | HeadMove | Touch] = field(default_factory=list)
-    # tool slips and camera moves drawn from a seed, added to the timeline (off by default; see
-    # ``timeline``)
+    # tool slips and camera moves drawn from a seed, played beside ``disturbances`` (off by default;
+    # ``station.scenario.timeline`` merges them)
     random_disturbances: RandomDisturbances = field(default_factory=RandomDisturbances)
     # touching the table after the identification
     touch_motion: TouchMotionConfig = field(default_factory=TouchMotionConfig)
