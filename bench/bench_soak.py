@@ -98,6 +98,10 @@ def run(args) -> None:
     monitor.write(result.wall)
 
 
+def _verdict(ok: bool) -> str:
+    return "met" if ok else "**not met**"
+
+
 def _fmt(value, spec: str = ".2f") -> str:
     return "-" if value is None else format(value, spec)
 
@@ -127,9 +131,14 @@ def memory_growth(samples: list[dict], end: float) -> dict | None:
 
 
 def report(args) -> list[str]:
-    """The table of ``args.out``'s run and its totals against the targets."""
-    metrics = json.loads((args.out / "metrics.json").read_text(encoding="utf-8"))
+    """The table of ``args.out``'s run and its totals against the targets (a run without its
+    metrics yet, stopped or still running: its memory so far)."""
     memory = json.loads((args.out / "memory.json").read_text(encoding="utf-8"))
+    if not (args.out / "metrics.json").is_file():
+        end = memory["samples"][-1]["time_s"] if memory["samples"] else 0.0
+        return ([f"- no metrics.json: the run stopped (or is still running) after {end:g} simulated s"]
+                + memory_lines(memory, end))
+    metrics = json.loads((args.out / "metrics.json").read_text(encoding="utf-8"))
     he = metrics["hand_eye"]
     scenario = load_scenario(args.scenario)
     from sustain_drake.station.random_disturbances import draw
@@ -153,9 +162,6 @@ def report(args) -> list[str]:
 
 def totals(he: dict, happened: list[dict], memory: dict, end: float) -> list[str]:
     """The targets' lines: each met or not, with the worst value."""
-    def verdict(ok: bool) -> str:
-        return "met" if ok else "**not met**"
-
     latencies = [d["detection_latency_s"] for d in happened]
     reconv = [d["reconvergence_after_detection_s"] for d in happened]
     detected = [x for x in latencies if x is not None and x <= 1.0]
@@ -172,17 +178,23 @@ def totals(he: dict, happened: list[dict], memory: dict, end: float) -> list[str
         f"{sum(d['kind'] == 'head_move' for d in happened)} camera moves); first convergence "
         + ("never" if first is None else f"at {first['time_s']:.1f} s "
            f"({first['camera_position_error_mm']:.2f} mm / {first['camera_rotation_error_deg']:.3f} deg)"),
-        f"- detected within 1 s: {len(detected)} of {n} ({verdict(len(detected) == n)}; worst "
+        f"- detected within 1 s: {len(detected)} of {n} ({_verdict(len(detected) == n)}; worst "
         f"{_fmt(max((x for x in latencies if x is not None), default=None))} s)",
         f"- re-converged within 15 s of the detection: {len(settled)} of {n} "
-        f"({verdict(len(settled) == n)}; worst "
+        f"({_verdict(len(settled) == n)}; worst "
         f"{_fmt(max((x for x in reconv if x is not None), default=None), '.1f')} s)",
-        f"- false alarms: {he['num_false_alarms']} ({verdict(he['num_false_alarms'] == 0)}"
+        f"- false alarms: {he['num_false_alarms']} ({_verdict(he['num_false_alarms'] == 0)}"
         + (f": at {', '.join(f'{t:.1f} s' for t in he['false_alarms_s'])})" if he["false_alarms_s"] else ")"),
         f"- adopted camera within 2 mm / 0.2 deg after each re-convergence: {len(good)} of {n} "
-        f"({verdict(len(good) == n)}; worst {_fmt(worst_mm)} mm / {_fmt(worst_deg, '.3f')} deg); every "
+        f"({_verdict(len(good) == n)}; worst {_fmt(worst_mm)} mm / {_fmt(worst_deg, '.3f')} deg); every "
         f"adoption of the run: {len(he['adopted'])}, wrong adoptions {he['num_wrong_adoptions']}",
     ]
+    return lines + memory_lines(memory, end)
+
+
+def memory_lines(memory: dict, end: float) -> list[str]:
+    """The resident memory's growth against the target, its series and the run's wall time."""
+    lines = []
     growth = memory_growth(memory["samples"], end)
     if growth is None:
         lines.append("- resident memory: the run did not reach minute 5")
@@ -191,7 +203,7 @@ def totals(he: dict, happened: list[dict], memory: dict, end: float) -> list[str
         lines.append(
             f"- resident memory {a['rss_mb']:.0f} MB at {a['time_s'] / 60:.0f} min, {b['rss_mb']:.0f} MB at "
             f"{b['time_s'] / 60:.0f} min: growth {100 * growth['growth']:.1f} % "
-            f"({verdict(growth['growth'] < MAX_GROWTH)} against < 5 %); the logs kept for the metrics grew "
+            f"({_verdict(growth['growth'] < MAX_GROWTH)} against < 5 %); the logs kept for the metrics grew "
             f"{b['logs_mb'] - a['logs_mb']:.0f} MB of it ({100 * growth['logs_growth']:.1f} %), the rest "
             f"{100 * growth['growth_without_logs']:.1f} %")
         series = ", ".join(f"{s['time_s'] / 60:.0f} min {s['rss_mb']:.0f}" for s in memory["samples"]
