@@ -178,10 +178,10 @@ def totals(he: dict, happened: list[dict], memory: dict, end: float) -> list[str
         f"{sum(d['kind'] == 'head_move' for d in happened)} camera moves); first convergence "
         + ("never" if first is None else f"at {first['time_s']:.1f} s "
            f"({first['camera_position_error_mm']:.2f} mm / {first['camera_rotation_error_deg']:.3f} deg)"),
-        f"- detected within 1 s: {len(detected)} of {n} ({_verdict(len(detected) == n)}; worst "
+        f"- detected within 1 s: {len(detected)} of {n} ({_verdict(len(detected) == n)}; worst measured "
         f"{_fmt(max((x for x in latencies if x is not None), default=None))} s)",
         f"- re-converged within 15 s of the detection: {len(settled)} of {n} "
-        f"({_verdict(len(settled) == n)}; worst "
+        f"({_verdict(len(settled) == n)}; worst measured "
         f"{_fmt(max((x for x in reconv if x is not None), default=None), '.1f')} s)",
         f"- false alarms: {he['num_false_alarms']} ({_verdict(he['num_false_alarms'] == 0)}"
         + (f": at {', '.join(f'{t:.1f} s' for t in he['false_alarms_s'])})" if he["false_alarms_s"] else ")"),
@@ -204,7 +204,8 @@ def memory_lines(memory: dict, end: float) -> list[str]:
             f"- resident memory {a['rss_mb']:.0f} MB at {a['time_s'] / 60:.0f} min, {b['rss_mb']:.0f} MB at "
             f"{b['time_s'] / 60:.0f} min: growth {100 * growth['growth']:.1f} % "
             f"({_verdict(growth['growth'] < MAX_GROWTH)} against < 5 %); the logs kept for the metrics grew "
-            f"{b['logs_mb'] - a['logs_mb']:.0f} MB of it ({100 * growth['logs_growth']:.1f} %), the rest "
+            f"{b['logs_mb'] - a['logs_mb']:.0f} MB of samples ({100 * growth['logs_growth']:.1f} %; Drake's "
+            f"VectorLog doubles its buffer when full, so up to twice that is allocated), the rest "
             f"{100 * growth['growth_without_logs']:.1f} %")
         series = ", ".join(f"{s['time_s'] / 60:.0f} min {s['rss_mb']:.0f}" for s in memory["samples"]
                            if round(s["time_s"]) % 300 == 0)
