@@ -37,7 +37,7 @@ from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.loops.hand_eye import add_hand_eye_loop
 from sustain_drake.loops.inspection import add_estimate_overlay, add_inspection
 from sustain_drake.station import ScenarioError, camera_info
-from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of
+from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of, timeline
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
@@ -138,7 +138,7 @@ def tool_boxes(station) -> tuple:
 # ---- evaluation ------------------------------------------------------------------------------
 def _disturbances(scenario) -> list[dict]:
     out = []
-    for d in scenario.disturbances:
+    for d in timeline(scenario):
         if isinstance(d, ToolSlip):
             out.append({"kind": "tool_slip", "time_s": d.time})
         elif isinstance(d, HeadMove):
@@ -227,6 +227,9 @@ def evaluate(handle, diagram, context) -> dict:
     later = m.before_next(t_tool, tool, disturbances, float(t_tool[-1]))
     for d, at_later in zip(disturbances, later, strict=True):
         d["tool_point_in_use_before_next"] = at_later
+    # The camera and tool point adopted at each re-convergence (what the loop settled on).
+    for d, settled in zip(disturbances, m.adopted_after(disturbances, adopted), strict=True):
+        d["adopted_after"] = settled
     refinements = [e.time for e in events if e.kind == coordination.REFINED]
     false_alarms = [t for t in detections
                     if not any(0.0 <= t - d["time_s"] <= config.false_alarm_window for d in disturbances)]

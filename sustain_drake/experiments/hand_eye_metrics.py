@@ -168,6 +168,16 @@ def before_next(times, errors, disturbances: list[dict], end: float, lead: float
             for k in range(len(disturbances))]
 
 
+def adopted_after(disturbances: list[dict], adopted: list[dict]) -> list[dict | None]:
+    """Per disturbance, the model adopted at its re-convergence (``reconverged_s``): its camera's
+    position (mm) and rotation (deg) errors and its tool point's (mm); None when it never re-converged
+    (or no adoption is logged at that time)."""
+    keys = ("time_s", "camera_position_error_mm", "camera_rotation_error_deg", "tool_point_error_mm")
+    by_time = {a["time_s"]: a for a in adopted}
+    return [None if d.get("reconverged_s") not in by_time
+            else {k: by_time[d["reconverged_s"]].get(k) for k in keys} for d in disturbances]
+
+
 def wrong_adoptions(adopted: list[dict]) -> list[dict]:
     """The adoptions whose camera is more than ``WRONG_CAMERA_POSITION_MM`` or
     ``WRONG_CAMERA_ROTATION_DEG`` off, or whose tool point (``true_point_error_mm``) is more than

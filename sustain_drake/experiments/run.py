@@ -15,6 +15,7 @@ import json
 import math
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,12 +64,14 @@ def _positive(value: float | None, name: str) -> None:
 
 def simulate_scenario(scenario: Scenario, out: str | Path, *, label: str = "scenario",
                       duration: float | None = None, live: bool = False, log_rate: float = 100.0,
-                      replay: bool = True) -> SimulationResult:
+                      replay: bool = True, on_step: Callable[[float, Simulator], None] | None = None
+                      ) -> SimulationResult:
     """Simulates ``scenario`` (a loaded ``Scenario``: see ``station.load_scenario`` and
     ``station.scenario.with_seed``) for ``duration`` s (default: the scenario's) and writes its
     outputs into the folder ``out``; ``label`` names the run in ``metrics.json``. ``live`` also shows
-    it in Meshcat (localhost) in real time. Raises ``RunError`` or ``ScenarioError`` (one line)
-    before anything is written."""
+    it in Meshcat (localhost) in real time. ``on_step(t, simulator)``, if given, is called after each
+    0.1 s step (a bench's monitor, e.g. of memory; it must not change the simulation). Raises
+    ``RunError`` or ``ScenarioError`` (one line) before anything is written."""
     _positive(duration, "duration")
     _positive(log_rate, "log rate")
     duration = scenario.duration if duration is None else duration
@@ -111,6 +114,8 @@ def simulate_scenario(scenario: Scenario, out: str | Path, *, label: str = "scen
         while t < duration - 1e-9:
             t = min(t + step, duration)
             simulator.AdvanceTo(t)
+            if on_step is not None:
+                on_step(t, simulator)
             bar.update(t - bar.n)
     wall = time.perf_counter() - start
 

@@ -41,6 +41,7 @@ from sustain_drake.station.scenario import (
     Touch,
     arm_motion,
     arm_of,
+    timeline,
     validate_scenario,
 )
 from sustain_drake.station.touch_plan import touch_postures
@@ -368,7 +369,7 @@ def _add_contact_truth(builder, world: _World) -> None:
 
 def _add_disturbances(builder, world: _World, scenario: Scenario) -> None:
     """The timeline: head moves, tool slips, touches (and the touches' ground truth)."""
-    plant, events = world.plant, scenario.disturbances
+    plant, events = world.plant, timeline(scenario)
     scheduler = builder.AddSystem(DisturbanceScheduler(
         head_initial=[scenario.head.pan, scenario.head.tilt],
         head_steps=[Step(e.time, (e.pan, e.tilt), e.duration)

@@ -31,6 +31,7 @@ from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.loops.hand_eye import HandEyeConfig
 from sustain_drake.loops.payload import KinestheticConfig
 from sustain_drake.station.models import ARMS, TOOL_FILES, ArmModel
+from sustain_drake.station.random_disturbances import HEAD_MOVE, SLIP, RandomDisturbances, draw
 
 # The first arm's joints (models/arm.sdf); a scenario's own arm: ``arm_of(scenario).joints``.
 ARM_JOINTS = ARMS["arm"].joints
@@ -280,6 +281,9 @@ class Scenario:
     lights: list[LightParameter] = field(default_factory=list)
     # timeline of tool slips, head moves and touches
     disturbances: list[ToolSlip | HeadMove | Touch] = field(default_factory=list)
+    # tool slips and camera moves drawn from a seed, played beside ``disturbances`` (off by default;
+    # ``station.scenario.timeline`` merges them)
+    random_disturbances: RandomDisturbances = field(default_factory=RandomDisturbances)
     # touching the table after the identification
     touch_motion: TouchMotionConfig = field(default_factory=TouchMotionConfig)
     # the body-detection experiment on this world (off by default)
@@ -288,6 +292,18 @@ class Scenario:
     hand_eye: HandEyeConfig = field(default_factory=HandEyeConfig)
     # the payload and touch experiment on this world (off by default)
     kinesthetic: KinestheticConfig = field(default_factory=KinestheticConfig)
+
+
+def timeline(scenario: Scenario) -> list[ToolSlip | HeadMove | Touch]:
+    """The run's disturbances, in time order: the scenario's ``disturbances`` and the ones
+    ``random_disturbances`` draws (``station.random_disturbances.draw``) from the configured head
+    angles and grasp, over the scenario's ``duration``. What the station plays and the metrics score."""
+    r = scenario.random_disturbances
+    drawn = draw(r, scenario.duration, (scenario.head.pan, scenario.head.tilt),
+                 (scenario.tool.slide, scenario.tool.pivot))
+    kinds = {HEAD_MOVE: HeadMove, SLIP: ToolSlip}
+    events = list(scenario.disturbances) + [kinds[d.kind](d.time, *d.state, d.duration) for d in drawn]
+    return sorted(events, key=lambda e: e.time)
 
 
 def load_scenario(filename: str | Path, scenario_name: str | None = None) -> Scenario:

@@ -21,6 +21,7 @@ from sustain_drake.loops.payload import KinestheticConfig, QuasiStaticConfig
 from sustain_drake.perception.camera_motion import CameraMotionParams
 from sustain_drake.perception.point_refinement import RefinementParams
 from sustain_drake.station.models import ARMS
+from sustain_drake.station.random_disturbances import SETTLE, RandomDisturbances
 from sustain_drake.station.scenario import (
     TOOL_MODELS,
     DepthNoiseConfig,
@@ -38,6 +39,7 @@ from sustain_drake.station.scenario import (
     WrenchSensorConfig,
     arm_motion,
     one_line,
+    timeline,
 )
 from sustain_drake.station.scenario_yaml import schema_fields, shown
 from sustain_drake.systems.depth_noise import DepthNoiseModel
@@ -148,6 +150,14 @@ RANGES: dict[type, dict[str, Range]] = {
                "pivot": _from(-math.pi / 2, math.pi / 2, "rad"), "duration": SPAN},
     HeadMove: {"time": TIME, "pan": _from(-math.pi, math.pi, "rad"),
                "tilt": _from(-math.pi, math.pi, "rad"), "duration": SPAN},
+    # A slip's or a turn's size within a change ToolSlip and HeadMove accept; a soak of days at most.
+    RandomDisturbances: {
+        "seed": SEED, "start_time": TIME, "interval": _from(SETTLE, DAY, "s"),
+        "slip_probability": FRACTION, "slide": _from(0, 0.15, "m"), "pivot": _from(0, math.pi / 2, "rad"),
+        "slide_limit": _from(0, 0.15, "m"), "pivot_limit": _from(0, math.pi / 2, "rad"),
+        "slip_duration": SPAN, "turn": _from(0, 1, "rad"), "turn_limit": _from(0, math.pi, "rad"),
+        "turn_duration": SPAN,
+    },
     Touch: {"time": TIME, "duration": SPAN, "p_TQ": _from(-1, 1, "m"), "f_T": _from(-1000, 1000, "N")},
     TouchTarget: {"p_TQ": _from(-1, 1, "m"), "down_T": _from(-1000, 1000), "p_WQ": _from(-5, 5, "m")},
     TouchMotionConfig: {
@@ -396,7 +406,30 @@ def _check_lights(lights) -> None:
                    "least one of [constant, linear, quadratic] must be above 0")
 
 
+def _check_random(s: Scenario) -> None:
+    """The random disturbances' ranges as pairs, their limits against their sizes, the timeline they
+    join (the drawn slips and head moves within ToolSlip's and HeadMove's ranges)."""
+    r, name = s.random_disturbances, "random_disturbances"
+    for key in ("interval", "slide", "pivot", "turn"):
+        pair = getattr(r, key)
+        _check(len(pair) == 2 and pair[0] <= pair[1],
+               f"{name}.{key} needs [min, max] with min <= max, got {shown(pair)}")
+    for size, limit in (("slide", "slide_limit"), ("pivot", "pivot_limit"), ("turn", "turn_limit")):
+        _check(getattr(r, size)[1] <= getattr(r, limit), f"{name}.{limit} must be at least {size}'s max "
+               f"({shown(getattr(r, size)[1])}), got {shown(getattr(r, limit))}")
+    if not r.enabled:
+        return
+    _check(r.slip_probability == 0.0 or s.tool.model != "none",
+           f"{name}: there is no tool to slip (tool.model: none): set slip_probability: 0")
+    _check(not any(isinstance(e, ToolSlip | HeadMove) for e in s.disturbances),
+           f"{name}: the draw starts from the configured grasp and head, so disturbances must not also "
+           "list !ToolSlip or !HeadMove (a !Touch is fine)")
+    for i, e in enumerate(d for d in timeline(s) if isinstance(d, ToolSlip | HeadMove)):
+        _check_numbers(e, f"{name} (drawn {i}, !{type(e).__name__} at {e.time:g} s)")
+
+
 def _check_timeline(s: Scenario) -> None:
+    _check_random(s)
     for i, e in enumerate(s.disturbances):
         name = f"disturbances[{i}] (!{type(e).__name__})"
         if isinstance(e, Touch):
