@@ -51,7 +51,7 @@ from sustain_drake.perception.point_refinement import (
     refine_points,
 )
 from sustain_drake.station import build_station, camera_info, load_scenario
-from sustain_drake.station.scenario import with_seed
+from sustain_drake.station.scenario_files import with_seed
 from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -28,7 +28,7 @@ from sustain_drake.loops.hand_eye import measured_refinement  # noqa: E402
 from sustain_drake.loops.pixel_scale import pixel_scale, scaled  # noqa: E402
 from sustain_drake.perception.point_refinement import central_symmetry, view_shift  # noqa: E402
 from sustain_drake.station import camera_info  # noqa: E402
-from sustain_drake.station.scenario import load_scenario_string  # noqa: E402
+from sustain_drake.station.scenario_files import load_scenario_string  # noqa: E402
 from sustain_drake.sweeps import load_sweep  # noqa: E402
 
 CRITERIA = {"symmetry >= 0.5": (0, lambda v: v >= 0.5),

@@ -23,12 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from make_scene_matrix import SWEEPS  # noqa: E402
 
 from sustain_drake.experiments.run import simulate_scenario  # noqa: E402
-from sustain_drake.station.scenario import (  # noqa: E402
-    Scenario,
-    ScenarioError,
-    load_scenario_string,
-    validate_scenario,
-)
+from sustain_drake.station.scenario import Scenario, ScenarioError
+from sustain_drake.station.scenario_files import load_scenario_string, validate_scenario
 from sustain_drake.sweeps import load_sweep  # noqa: E402
 from sustain_drake.sweeps.spec import override_document  # noqa: E402
 

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results_page import publish  # noqa: E402
 
 from sustain_drake.files import write_atomically  # noqa: E402
-from sustain_drake.station.scenario import load_scenario  # noqa: E402
+from sustain_drake.station.scenario_files import load_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "diagrams" / "soak.yaml"

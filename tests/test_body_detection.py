@@ -18,7 +18,7 @@ from sustain_drake.experiments import body_detection
 from sustain_drake.experiments.run import simulate_file
 from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.station import ScenarioError, build_station, load_scenario
-from sustain_drake.station.scenario import with_seed
+from sustain_drake.station.scenario_files import with_seed
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "diagrams" / "body_detection.yaml"

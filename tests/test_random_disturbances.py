@@ -23,7 +23,8 @@ from sustain_drake.station.random_disturbances import (
     RandomDisturbances,
     draw,
 )
-from sustain_drake.station.scenario import HeadMove, ToolSlip, Touch, load_scenario_string, timeline
+from sustain_drake.station.scenario import HeadMove, ToolSlip, Touch, timeline
+from sustain_drake.station.scenario_files import load_scenario_string
 
 ROOT = Path(__file__).resolve().parents[1]
 SOAK = ROOT / "diagrams" / "soak.yaml"

@@ -17,11 +17,10 @@ from hypothesis import strategies as st
 from pydrake.common.schema import Transform
 
 from sustain_drake.station import ScenarioError, build_station, load_scenario
-from sustain_drake.station.scenario import (
-    Scenario,
+from sustain_drake.station.scenario import Scenario, scenario_text
+from sustain_drake.station.scenario_files import (
     _top_level_keys,
     load_scenario_string,
-    scenario_text,
     validate_scenario,
     with_seed,
 )

@@ -20,7 +20,8 @@ from sustain_drake.perception.optical_flow import TrackerParams
 from sustain_drake.station import ScenarioError, build_station, models_dir
 from sustain_drake.station.build import ROOM_LIGHTS
 from sustain_drake.station.models import TOOL_FILES
-from sustain_drake.station.scenario import TOOL_MODELS, Scenario, load_scenario_string
+from sustain_drake.station.scenario import TOOL_MODELS, Scenario
+from sustain_drake.station.scenario_files import load_scenario_string
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKSHOP = ("wood_handle", "metal_bar", "speckle_bar", "plain_bar")

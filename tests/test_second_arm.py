@@ -20,12 +20,8 @@ from sustain_drake.experiments.run import simulate_file
 from sustain_drake.station import ScenarioError, build_station, camera_info, load_scenario, models_dir
 from sustain_drake.station.build import sensor_pose_in_hand
 from sustain_drake.station.models import ARMS, make_parser, model_file
-from sustain_drake.station.scenario import (
-    Scenario,
-    arm_motion,
-    load_scenario_string,
-    scenario_text,
-)
+from sustain_drake.station.scenario import Scenario, arm_motion, scenario_text
+from sustain_drake.station.scenario_files import load_scenario_string
 
 ROOT = Path(__file__).resolve().parents[1]
 SECOND_ARM = ROOT / "diagrams" / "second_arm.yaml"

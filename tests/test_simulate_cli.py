@@ -9,7 +9,8 @@ import pytest
 from test_estimate_overlay import recorded_tracks
 
 from sustain_drake.cli.main import main
-from sustain_drake.station.scenario import load_scenario_string, scenario_text
+from sustain_drake.station.scenario import scenario_text
+from sustain_drake.station.scenario_files import load_scenario_string
 
 ROOT = Path(__file__).resolve().parents[1]
 HAND_EYE = ROOT / "diagrams" / "hand_eye.yaml"

@@ -18,13 +18,8 @@ from sustain_drake.station import (
     load_scenario,
     models_dir,
 )
-from sustain_drake.station.scenario import (
-    HeadMove,
-    Scenario,
-    ToolSlip,
-    arm_of,
-    load_scenario_string,
-)
+from sustain_drake.station.scenario import HeadMove, Scenario, ToolSlip, arm_of
+from sustain_drake.station.scenario_files import load_scenario_string
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = sorted((ROOT / "diagrams").glob("*.yaml"))

@@ -14,7 +14,7 @@ from sustain_drake.cli.main import main
 from sustain_drake.experiments import run as run_module
 from sustain_drake.experiments.targets import TARGETS, check_targets
 from sustain_drake.station import load_scenario
-from sustain_drake.station.scenario import load_scenario_string, with_seed
+from sustain_drake.station.scenario_files import load_scenario_string, with_seed
 from sustain_drake.sweeps import SweepError, SweepRunError, load_sweep, read_table, run_sweep, write_summary
 from sustain_drake.sweeps.engine import flatten
 

@@ -26,7 +26,7 @@ from sustain_drake.files import (
     remove_unchanged,
 )
 from sustain_drake.station import ScenarioError, load_scenario
-from sustain_drake.station.scenario import SEED_START_SPREAD, scenario_label, with_seed
+from sustain_drake.station.scenario_files import SEED_START_SPREAD, scenario_label, with_seed
 
 # What a run writes in its folder (experiments.run and the experiments' finish): glob patterns.
 RUN_OUTPUTS = ("replay.html", "log.npz", "metrics.json", "likelihood_*.png", "body_vs_truth.png",

@@ -29,7 +29,8 @@ from sustain_drake.experiments import EXPERIMENTS
 from sustain_drake.files import write_atomically
 from sustain_drake.station import Scenario, build_station, load_scenario
 from sustain_drake.station.meshcat import make_local_meshcat
-from sustain_drake.station.scenario import scenario_label, scenario_text, with_seed
+from sustain_drake.station.scenario import scenario_text
+from sustain_drake.station.scenario_files import scenario_label, with_seed
 from sustain_drake.systems.ground_truth import PoseToVector
 
 # The station's vector outputs saved in log.npz, and its poses (saved as N x 4 x 4 arrays).
@@ -67,7 +68,7 @@ def simulate_scenario(scenario: Scenario, out: str | Path, *, label: str = "scen
                       replay: bool = True, on_step: Callable[[float, Simulator], None] | None = None
                       ) -> SimulationResult:
     """Simulates ``scenario`` (a loaded ``Scenario``: see ``station.load_scenario`` and
-    ``station.scenario.with_seed``) for ``duration`` s (default: the scenario's) and writes its
+    ``station.scenario_files.with_seed``) for ``duration`` s (default: the scenario's) and writes its
     outputs into the folder ``out``; ``label`` names the run in ``metrics.json``. ``live`` also shows
     it in Meshcat (localhost) in real time. ``on_step(t, simulator)``, if given, is called after each
     0.1 s step (a bench's monitor, e.g. of memory; it must not change the simulation). Raises
@@ -141,7 +142,7 @@ def simulate_scenario(scenario: Scenario, out: str | Path, *, label: str = "scen
 def simulate_file(path: str | Path, name: str | None = None, seed: int | None = None,
                   out: str | Path | None = None, **options) -> SimulationResult:
     """Loads scenario ``name`` of the file ``path`` (``station.load_scenario``), with ``seed`` applied
-    (``station.scenario.with_seed``; None: the scenario's own seeds), and simulates it into ``out``
+    (``station.scenario_files.with_seed``; None: the scenario's own seeds), and simulates it into ``out``
     (default ``out/<scenario name>``); ``options`` go to ``simulate_scenario``."""
     scenario = load_scenario(path, name)
     if seed is not None:

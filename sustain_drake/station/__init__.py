@@ -12,7 +12,8 @@ from sustain_drake.station.build import (
     sensor_pose_in_hand,
 )
 from sustain_drake.station.models import models_dir
-from sustain_drake.station.scenario import Scenario, ScenarioError, load_scenario
+from sustain_drake.station.scenario import Scenario, ScenarioError
+from sustain_drake.station.scenario_files import load_scenario
 
 __all__ = ["EXPORTED_OUTPUTS", "Scenario", "ScenarioError", "build_station", "camera_info",
            "held_shape", "load_scenario", "models_dir", "sensor_pose_in_hand"]

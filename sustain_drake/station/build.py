@@ -42,8 +42,8 @@ from sustain_drake.station.scenario import (
     arm_motion,
     arm_of,
     timeline,
-    validate_scenario,
 )
+from sustain_drake.station.scenario_files import validate_scenario
 from sustain_drake.station.touch_plan import touch_postures
 from sustain_drake.systems.camera_sampler import RgbdCameraSampler
 from sustain_drake.systems.contact_truth import ContactTruth

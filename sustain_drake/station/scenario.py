@@ -11,17 +11,13 @@ key.
 """
 
 
-import copy
 import dataclasses
 import math
 import re
 from dataclasses import field
-from pathlib import Path
 
-import numpy as np
-import yaml
 from pydrake.common.schema import Transform
-from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.common.yaml import yaml_dump_typed
 from pydrake.geometry import LightParameter
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -306,101 +302,6 @@ def timeline(scenario: Scenario) -> list[ToolSlip | HeadMove | Touch]:
     return sorted(events, key=lambda e: e.time)
 
 
-def load_scenario(filename: str | Path, scenario_name: str | None = None) -> Scenario:
-    """Loads and checks a scenario file; every problem is a one-line ``ScenarioError`` naming the
-    key, raised before anything is built (see ``validate_scenario``).
-
-    A file is either one scenario (its top-level keys are ``Scenario`` fields) or several named
-    scenarios (its top-level keys are names; a variant is a YAML merge of a base, ``<<: *base``).
-    ``scenario_name`` picks one of several; None picks the one named like the file (``hand_eye``
-    in ``hand_eye.yaml``) or the only one. A key given twice in one mapping is an error."""
-    path = Path(filename)
-    name = scenario_name_in(path, scenario_name)
-    try:
-        return _load_text(path.read_text(encoding="utf-8"), name)
-    except (OSError, UnicodeDecodeError) as e:
-        raise ScenarioError(f"{path}: not a readable YAML file ({one_line(e)})") from None
-    except ScenarioError as e:
-        raise ScenarioError(f"{_where(path, name)}: {e}") from None
-
-
-def _load_text(text: str, name: str | None) -> Scenario:
-    """The scenario ``name`` (None: the whole document) of the YAML ``text``, checked."""
-    # These modules read this one's types, so they are imported when first needed.
-    from sustain_drake.station.scenario_yaml import (
-        check_duplicate_keys,
-        load_problem,
-        raw_document,
-        shape_problem,
-    )
-
-    check_duplicate_keys(text)
-    raw = raw_document(text)
-    root = raw.get(name) if isinstance(raw, dict) and name is not None else raw
-    if isinstance(root, dict):
-        problem = shape_problem(root, Scenario, "")
-        if problem:
-            raise ScenarioError(problem)
-    try:
-        scenario = yaml_load_typed(schema=Scenario, data=text, child_name=name)
-    except Exception as e:  # yaml_load_typed raises RuntimeError/ValueError/TypeError/yaml errors
-        raise ScenarioError(load_problem(text, name, e)) from None
-    validate_scenario(scenario, experiments=True)
-    return scenario
-
-
-def scenario_name_in(filename: str | Path, scenario_name: str | None = None) -> str | None:
-    """The name of the scenario ``load_scenario`` reads from ``filename``: None for a file that is
-    one scenario, else ``scenario_name`` checked against the file's names (see ``load_scenario``)."""
-    path = Path(filename)
-    if not path.is_file():
-        raise ScenarioError(f"{path}: no such scenario file")
-    names = _top_level_keys(path)
-    fields = {f.name for f in dataclasses.fields(Scenario)}
-    if set(names) <= fields:  # one scenario
-        if scenario_name is not None:
-            raise ScenarioError(f"{path} holds one scenario, not named ones: leave out the scenario name "
-                                f"({scenario_name!r})")
-        return None
-    if scenario_name is None:
-        if path.stem in names or len(names) == 1:
-            return path.stem if path.stem in names else names[0]
-        raise ScenarioError(f"{path} holds the scenarios {', '.join(names)}: name one")
-    if scenario_name not in names:
-        raise ScenarioError(f"{path} has no scenario {scenario_name!r} (it has {', '.join(names)})")
-    return scenario_name
-
-
-def scenario_label(filename: str | Path, scenario_name: str | None = None) -> str:
-    """A run's name for its outputs: the scenario's name, or the file's stem for a one-scenario file."""
-    return scenario_name_in(filename, scenario_name) or Path(filename).stem
-
-
-def _top_level_keys(path: Path) -> list[str]:
-    """The top-level keys of a YAML file, read without building its values (tags are Drake's)."""
-    try:
-        node = yaml.compose(path.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError, OSError) as e:
-        raise ScenarioError(f"{path}: not a readable YAML file ({one_line(e)})") from None
-    if node is None:
-        return []
-    if not isinstance(node, yaml.MappingNode):
-        raise ScenarioError(f"{path}: a scenario file is a mapping of keys to values")
-    return [k.value for k, _ in node.value]
-
-
-def _where(path: Path, name: str | None) -> str:
-    return f"{path}" if name is None else f"{path} [{name}]"
-
-
-def load_scenario_string(data: str, name: str = "<string>") -> Scenario:
-    """Like ``load_scenario`` for the YAML text of one scenario (tests, embedding, sweeps)."""
-    try:
-        return _load_text(data, None)
-    except ScenarioError as e:
-        raise ScenarioError(f"{name}: {e}") from None
-
-
 def scenario_text(scenario: Scenario) -> str:
     """The scenario as YAML, every key written out (what a run actually used: the arm's own motion
     defaults filled in, see ``arm_motion``)."""
@@ -431,26 +332,6 @@ def arm_motion(scenario: Scenario) -> MotionConfig:
     return dataclasses.replace(motion, **changes) if changes else motion
 
 
-# A seed delays the distractor's start by up to this (s), so seeds differ in its phase too.
-SEED_START_SPREAD = 3.0
-
-
-def with_seed(scenario: Scenario, seed: int) -> Scenario:
-    """A copy of ``scenario`` with one seed for the whole run: the motion generator's, the depth and
-    wrench noise's (offset, to keep the streams apart), and the distractor's start, delayed by a
-    seeded 0-``SEED_START_SPREAD`` s."""
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ScenarioError(f"a seed must be an integer >= 0, got {seed!r}")
-    seeded = copy.deepcopy(scenario)
-    seeded.motion.seed = int(seed)
-    seeded.depth_noise.seed = int(seed) + 1000
-    seeded.wrench_sensor.seed = int(seed) + 2000
-    delay = np.random.default_rng([int(seed), 2024]).uniform(0.0, SEED_START_SPREAD)
-    seeded.distractor.start_time += float(delay)
-    validate_scenario(seeded, experiments=True)
-    return seeded
-
-
 def one_line(error: Exception) -> str:
     """A yaml_load_typed or Drake error as one line a user acts on (unknown keys and tags named)."""
     message = " ".join(str(error).split())
@@ -468,8 +349,3 @@ def one_line(error: Exception) -> str:
     return message if len(message) <= 300 else message[:297] + "..."
 
 
-def validate_scenario(s: Scenario, *, experiments: bool = False) -> None:
-    """Rejects values the simulation cannot use (``station.validation.validate_scenario``)."""
-    from sustain_drake.station.validation import validate_scenario as validate  # reads this module
-
-    validate(s, experiments=experiments)

@@ -65,7 +65,7 @@ def run_cell(job: CellJob) -> dict:
     line (the traceback goes to ``error.txt`` in the cell's folder); never raises."""
     # Imported here: the client process need not build a Drake diagram to submit cells.
     from sustain_drake.experiments.run import simulate_scenario
-    from sustain_drake.station.scenario import load_scenario_string
+    from sustain_drake.station.scenario_files import load_scenario_string
 
     start = time.perf_counter()
     out = Path(job.out_dir)

@@ -6,7 +6,7 @@
     scenario_name: hand_eye       # optional: which scenario of a file of several
     duration: 130                 # optional: simulated seconds of every cell (default: the scenario's)
     grid:                         # every combination of these axes' values
-      seed: [~, 1, 2]             # `seed` is station.scenario.with_seed; ~ keeps the scenario's seeds
+      seed: [~, 1, 2]             # `seed` is station.scenario_files.with_seed; ~ keeps the scenario's seeds
       camera.width: [640, 1280]
     zip:                          # these axes together, value by value (lists of equal length)
       camera.width: [640, 1280]
@@ -33,15 +33,8 @@ from pathlib import Path
 import yaml
 from pydrake.common.yaml import yaml_load_typed
 
-from sustain_drake.station.scenario import (
-    Scenario,
-    ScenarioError,
-    load_scenario,
-    one_line,
-    scenario_text,
-    validate_scenario,
-    with_seed,
-)
+from sustain_drake.station.scenario import Scenario, ScenarioError, one_line, scenario_text
+from sustain_drake.station.scenario_files import load_scenario, validate_scenario, with_seed
 
 SEED_AXIS = "seed"
 KEYS = ("scenario", "scenario_name", "duration", "grid", "zip")
