@@ -167,7 +167,6 @@ def test_the_refiner_gates_points_against_the_stations_own_depth_noise():
         hand_eye.add_to_diagram(builder, station, scenario, None)
         refiner = builder.Build().GetSubsystemByName("feature_refiner")
         assert refiner.depth_noise == expected
-        assert refiner.params.max_view_shift_sigmas == 1.0
 
 
 def test_a_cloned_context_keeps_its_own_tracker_and_candidate_states():

@@ -94,11 +94,10 @@ def measured_candidates() -> CandidateParams:
 
 def measured_refinement() -> RefinementParams:
     """The FeatureRefiner's settings the results were measured with: cornerSubPix with a 9 x 9
-    window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it), only points fixed on their
-    face (centrally symmetric, or moved by a 45 deg tilt by at most the depth noise at their depth),
-    the depth on the face's fitted plane (docs/hand_eye.md, "The points")."""
-    return RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3, depth_plane=True,
-                            max_view_shift_sigmas=1.0)
+    window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it), only centrally symmetric
+    points, the depth on the face's fitted plane (docs/hand_eye.md, "The points"; the view-shift
+    gate, ``max_view_shift_sigmas``, is measured there and left off)."""
+    return RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3, depth_plane=True)
 
 
 @dataclasses.dataclass
