@@ -17,17 +17,13 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.sensors import CameraInfo
-from test_hand_eye import PERIOD, ScriptedToolPoint
+from test_hand_eye import add_scripted_loop
 
 from sustain_drake.identification import coordination
-from sustain_drake.loops.identify_observe import connect_identify_observe
 from sustain_drake.loops.inspection import add_estimate_overlay, add_inspection
-from sustain_drake.station import build_station, camera_info, load_scenario
+from sustain_drake.station import camera_info
 from sustain_drake.station.meshcat import make_local_meshcat
-from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
-from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.estimate_overlay import frustum_segments
-from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation
 
 ROOT = Path(__file__).resolve().parents[1]
 FPS = 32.0  # the recording's frames per second
@@ -61,28 +57,10 @@ def test_the_frustum_reaches_the_image_corners():
 @pytest.fixture(scope="module")
 def recorded_run():
     """12 s of the station with a scripted tool point (converges by 11 s), the overlay recorded."""
-    scenario = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
-    scenario.camera.rgb = scenario.camera.depth = False
-    scenario.distractor.enabled = False
-    scenario.disturbances = []
-    scenario.hand_eye.candidates.confirm_with_witness = False  # one scripted point
-    config = scenario.hand_eye.coordination
-    config.allowable_error_factor = 100.0
-    config.min_gap_ratio = 10.0
     builder = DiagramBuilder()
-    station = builder.AddSystem(build_station(scenario))
-    source = builder.AddSystem(ScriptedToolPoint())
-    for name in ("X_WH", "true_X_WC", "true_p_HP"):
-        builder.Connect(station.GetOutputPort(name), source.GetInputPort(name))
-    candidates = builder.AddSystem(CandidateIdentifiers(
-        EyeToHandFormulation(config.criteria()), scenario.hand_eye.candidates, PERIOD))  # fmt: skip
-    machine = builder.AddSystem(CoordinationStateMachine(16, config.rule(), PERIOD))
-    builder.Connect(source.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
-    builder.Connect(source.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
-    builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
-    connect_identify_observe(builder, candidates, machine)
-    builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
-    builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
+    scripted = add_scripted_loop(builder, [])
+    scenario, station, source = scripted.scenario, scripted.station, scripted.source
+    candidates, machine = scripted.candidates, scripted.machine
     loop = SimpleNamespace(candidates=candidates, state_machine=machine,
                            candidate_features=lambda: source.GetOutputPort("tracked_features"))  # fmt: skip
     inspection = add_inspection(builder, loop, None)

@@ -6,6 +6,7 @@ camera: fast) through a tool slip and a head move; and the whole loop from rende
 """
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -61,17 +62,18 @@ class ScriptedToolPoint(LeafSystem):
                                           in_body_cell=np.array([True]), actuator=np.array([-1])))
 
 
-def test_scripted_tool_point_on_the_station_detects_a_slip_and_a_head_move():
+def add_scripted_loop(builder, disturbances: list) -> SimpleNamespace:
+    """The hand-eye world without rendering, the person or its disturbances (``disturbances``
+    instead), its candidates fed one ``ScriptedToolPoint``, the identify/observe state machine
+    wired: ``(scenario, station, source, candidates, machine)``."""
     scenario = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
     scenario.camera.rgb = scenario.camera.depth = False
     scenario.distractor.enabled = False
-    scenario.disturbances = [ToolSlip(time=14.0, slide=0.04, pivot=0.35, duration=0.1),
-                             HeadMove(time=26.0, pan=0.1, tilt=0.15, duration=0.5)]
+    scenario.disturbances = disturbances
     scenario.hand_eye.candidates.confirm_with_witness = False  # one scripted point
     config = scenario.hand_eye.coordination
     config.allowable_error_factor = 100.0  # the paper's: the scripted noise is Gaussian
     config.min_gap_ratio = 10.0
-    builder = DiagramBuilder()
     station = builder.AddSystem(build_station(scenario))
     source = builder.AddSystem(ScriptedToolPoint())
     for name in ("X_WH", "true_X_WC", "true_p_HP"):
@@ -85,6 +87,15 @@ def test_scripted_tool_point_on_the_station_detects_a_slip_and_a_head_move():
     connect_identify_observe(builder, candidates, machine)
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
+    return SimpleNamespace(scenario=scenario, station=station, source=source, candidates=candidates,
+                           machine=machine)
+
+
+def test_scripted_tool_point_on_the_station_detects_a_slip_and_a_head_move():
+    builder = DiagramBuilder()
+    loop = add_scripted_loop(builder, [ToolSlip(time=14.0, slide=0.04, pivot=0.35, duration=0.1),
+                                       HeadMove(time=26.0, pan=0.1, tilt=0.15, duration=0.5)])
+    station, candidates, machine = loop.station, loop.candidates, loop.machine
     simulator = Simulator(builder.Build())
     simulator.AdvanceTo(13.9)
     context = simulator.get_context()
