@@ -133,6 +133,20 @@ def test_the_person_alone_the_robot_alone_or_a_few_outliers_never_move_the_camer
     assert out[:, 1].max() == 0 and out[:, 0].max() == 0
 
 
+def test_unflagged_arm_features_that_rested_do_not_become_the_scene_when_the_arm_moves_again():
+    # A near camera: the arm (its features not flagged by the body detector) fills most of the
+    # image, 60 features against 25 of the background. The arm moves, rests 1 s, moves again: its
+    # features, still only while it rested, are no anchors when it moves.
+    scene = Scene(seed=7, background=25, person=0, robot=60)
+    scene.groups["robot"][1] = False
+
+    def arm(k):
+        return {} if 30 <= k < 60 else {"robot": shift([2.0, 1.0])}
+
+    state, out = run(scene, 120, arm, lambda k: not 30 <= k < 60)
+    assert out[:, 1].max() == 0
+
+
 def test_too_few_background_features_never_judge_a_frame():
     scene = Scene(seed=5, background=PARAMS.min_background - 1, person=0, robot=0)
     state, _ = run(scene, 30, lambda k: {})

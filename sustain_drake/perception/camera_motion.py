@@ -6,13 +6,17 @@ point when the camera moved is blind to the move. But a moving camera moves the 
 scene in the image coherently (one global image motion), whereas the robot moves only its own
 body's features and a walking person a minority of them. So, per frame:
 
-- the *background*: the *anchors*, tracked features that have not moved against the scene for at
-  least ``anchor_time`` s (within ``feature_still_px`` of where they became still, so that a
-  slow drift adds up; while the scene moves, their flow within ``inlier_px`` of the frame's global
-  motion: a static corner stays an anchor while the camera turns)
-  and are not the robot's (neither a body feature nor in a body cell: ``robot`` below), unless the
-  arm has been at rest for ``anchor_time`` (a body at rest is static scene). A walking person's
-  features keep moving and never become anchors; a feature seeded in this frame has no flow yet;
+- the *background*: the *anchors*, tracked features that have not moved against the scene
+  (within ``feature_still_px`` of where they became still, so that a slow drift adds up; while the
+  scene moves, their flow within ``inlier_px`` of the frame's global motion: a static corner stays
+  an anchor while the camera turns) through ``anchor_time`` s of arm motion (``static_features``)
+  and are not the robot's (neither a body feature nor in a body cell: ``robot`` below); while the
+  arm has been at rest for ``anchor_time``, every feature still for that long (a body at rest is
+  static scene). A feature that became still only while the arm rested is no anchor once it moves
+  again, whatever the body detector says: from a near camera the arm fills most of the image, and
+  its unflagged features, all moving off together as the arm starts, would be "the scene". A
+  walking person's features keep moving and never become anchors; a feature seeded in this frame
+  has no flow yet;
 - the *global motion*: a similarity (rotation, uniform scale, translation; 4 degrees of freedom)
   fitted by RANSAC (``cv2.estimateAffinePartial2D``) from the anchors' previous pixels
   (``p_px - flow_px``) to their current ones;
@@ -367,8 +371,11 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
     p_prev = p_px - flow_px
     finite = np.all(np.isfinite(p_px) & np.isfinite(flow_px), axis=1)
     tracked = ~np.isnan(since)
-    still_long = time - np.where(tracked, since, time) >= params.anchor_time
-    anchors = finite & tracked & still_long & (arm_at_rest | ~robot)
+    if arm_at_rest:
+        still_enough = time - np.where(tracked, since, time) >= params.anchor_time
+    else:
+        still_enough = static_features(state, ids, params)
+    anchors = finite & tracked & still_enough & (arm_at_rest | ~robot)
     frame = frame_motion(p_prev[anchors], p_px[anchors], params, points)
     # Memory: a feature moving against the scene restarts its still time; so does a feature seeded
     # now. While the scene moves: its flow off the frame's motion (and its still pixel follows);
