@@ -213,7 +213,7 @@ def print_eye_to_hand_points(result: EyeToHandPointsResult, points, poses, strea
     w("per point: p_HP, its 1 sd and RMS under the joint camera; 'alone': its own fit's RMS and how far its "
       "camera is from the joint one\n")
     w(f"  {'point':<12} {'samples':>7} {'RMS mm':>8} {'weight':>8}   {'p_HP [m]':<30} {'1 sd mm':>7}   "
-      f"{'alone: RMS mm':>13} {'camera mm':>9} {'deg':>7}\n")
+      f"{'alone: RMS mm':>13} {'off mm':>9} {'off deg':>7}\n")
     offsets = result.single_offsets()
     for k, label in enumerate(result.labels):
         p = "  ".join(f"{v:+.6f}" for v in result.p_HP[k])
