@@ -35,6 +35,7 @@ from sustain_drake.recorded_data import (
     read_points_csv,
     read_poses_csv,
     write_point_tracks_csv,
+    write_points_csv,
     write_poses_csv,
 )
 
@@ -300,3 +301,32 @@ def test_fuzz_labelled_points_and_poses_files(points, poses):
         after = snapshot(folder)
         changed = {p.name for p in before.keys() | after.keys() if before.get(p) != after.get(p)}
         assert changed == ({"result.yaml"} if code == 0 else set()), (code, changed)
+
+
+def _flagged(text: str) -> list[tuple[str, int]]:
+    """(the residual block's title, sample number) of every line flagged large."""
+    found, block = [], ""
+    for line in text.splitlines():
+        if line.startswith("per-sample residuals"):
+            block = line
+        elif "<-- large" in line:
+            found.append((block, int(line.split()[0])))
+    return found
+
+
+def test_a_mispaired_sample_is_flagged_in_the_printout(files):
+    points, poses, data, X_WH = files
+    number, cells = _first_row_of(points, "10")
+    cells[2] = repr(float(cells[2]) + 0.02)  # 2 cm off: another moment's position
+    stream = io.StringIO()
+    criteria = eye_to_hand.default_criteria()
+    assert run_eye_to_hand(_edit(points, number, ",".join(cells)), poses, None, criteria, stream) == 0
+    assert _flagged(stream.getvalue()) == [
+        ("per-sample residuals [mm] of point '10' (sample: the poses' row, from 0):", int(cells[0]))]
+    # One point (x,y,z): the real data set's corner with its sixth position 1 cm off, numbered from 1.
+    corner = read_points_csv(DATA / "corner_points.csv")
+    corner[5] += [0.01, 0.0, 0.0]
+    stream = io.StringIO()
+    moved = _write(points.parent / "moved.csv", write_points_csv(corner))
+    assert run_eye_to_hand(moved, DATA / "poses.csv", None, criteria, stream) == 0
+    assert _flagged(stream.getvalue()) == [("per-sample residuals [mm]:", 6)]

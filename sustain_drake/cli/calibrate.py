@@ -186,9 +186,15 @@ def print_eye_to_hand(result, points, poses, stream) -> None:
     w(f"eigenvalue gap lambda_15/lambda_16: {result.gap_ratio:.4g}   SSD to a rotation: {result.ssd:.3g}\n")
     w("lambda_13..lambda_16: " + "  ".join(f"{v:.4g}" for v in lam[-4:]) + "\n")
     w("per-sample residuals [mm]:\n")
-    limit = OUTLIER_FACTOR * result.rms
-    for i, r in enumerate(result.residuals, start=1):
-        flag = "   <-- large: check this sample's pairing" if r > limit else ""
+    numbers = np.arange(1, len(result.residuals) + 1)
+    _write_residuals(w, numbers, result.residuals, numbers[result.residuals > OUTLIER_FACTOR * result.rms])
+
+
+def _write_residuals(w, numbers, residuals, flagged) -> None:
+    """One line per sample (its number, its residual in mm), the ``flagged`` numbers marked."""
+    flagged = set(np.asarray(flagged).tolist())
+    for i, r in zip(np.asarray(numbers).tolist(), residuals, strict=True):
+        flag = "   <-- large: check this sample's pairing" if i in flagged else ""
         w(f"  {i:4d}  {r * 1e3:8.3f}{flag}\n")
 
 
@@ -221,13 +227,9 @@ def print_eye_to_hand_points(result: EyeToHandPointsResult, points, poses, strea
           f"{result.weights[k]:>8.3g}   {p:<30} {point_errors[k] * 1e3:>7.3f}   "
           f"{result.single[k].rms * 1e3:>13.3f} {offsets[k, 0] * 1e3:>9.2f} "
           f"{math.degrees(offsets[k, 1]):>7.3f}\n")
-    outliers = result.outliers()
-    for k, label in enumerate(result.labels):
+    for k, (label, flagged) in enumerate(zip(result.labels, result.outliers(), strict=True)):
         w(f"per-sample residuals [mm] of point {label!r} (sample: the poses' row, from 0):\n")
-        flagged = set(outliers[k].tolist())
-        for i, r in zip(result.samples[k].tolist(), result.residuals[k], strict=True):
-            flag = "   <-- large: check this sample's pairing and label" if i in flagged else ""
-            w(f"  {i:4d}  {r * 1e3:8.3f}{flag}\n")
+        _write_residuals(w, result.samples[k], result.residuals[k], flagged)
 
 
 def _run_eye_to_hand(args: argparse.Namespace) -> int:

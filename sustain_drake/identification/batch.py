@@ -385,8 +385,8 @@ def _tracks(points, n: int) -> list[tuple]:
                                   f"got {describe(points)}{size}")  # fmt: skip
     tracks = []
     for label, value in points.items():
-        if not ((type(label) is str and label and label.isprintable() and len(label) <= MAX_LABEL_CHARACTERS)
-                or (isinstance(label, numbers.Integral) and not isinstance(label, (bool, np.bool_)))):
+        text = isinstance(label, str) and label and label.isprintable() and len(label) <= MAX_LABEL_CHARACTERS
+        if not (text or (isinstance(label, numbers.Integral) and not isinstance(label, (bool, np.bool_)))):
             raise IdentificationError("points: a label must be a non-empty printable string (at most "
                                       f"{MAX_LABEL_CHARACTERS} characters) or an integer, got "
                                       f"{describe(label)}")  # fmt: skip
