@@ -44,3 +44,21 @@ def make_samples(
 
 def rotation_error_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
     return float(Rotation.from_matrix(R_a.T @ R_b).magnitude() * 180.0 / np.pi)
+
+
+def make_points(truth: EyeToHandTruth, p_HP: np.ndarray, n: int, noise_m=0.0, missing: float = 0.0,
+                seed: int = 1, rotate: bool = True) -> tuple[dict, np.ndarray]:  # fmt: skip
+    """Several points fixed on the hand (``p_HP``: K x 3) seen by one camera over ``n`` hand poses
+    (``make_samples``'s): ``({label "p<k>": (samples, p_C)}, X_WH)``, each point missing from a
+    sample with probability ``missing`` and measured with Gaussian noise ``noise_m`` (m per axis; a
+    number, or one per point)."""
+    rng = np.random.default_rng(seed)
+    _, X_WH = make_samples(truth, n, seed=seed, rotate=rotate)
+    noise = np.broadcast_to(np.asarray(noise_m, dtype=float), (len(p_HP),))
+    R_WC, p_WC = truth.X_WC[:3, :3], truth.X_WC[:3, 3]
+    points = {}
+    for k, (p, sigma) in enumerate(zip(p_HP, noise, strict=True)):
+        samples = np.flatnonzero(rng.random(n) >= missing)
+        p_W = np.einsum("nij,j->ni", X_WH[samples, :3, :3], p) + X_WH[samples, :3, 3]
+        points[f"p{k}"] = (samples, (p_W - p_WC) @ R_WC + rng.normal(0.0, sigma, (len(samples), 3)))
+    return points, X_WH

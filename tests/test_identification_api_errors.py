@@ -86,6 +86,7 @@ P_C = np.random.default_rng(5).normal(size=(N_BATCH, 3))
 X_WH = np.tile(X, (N_BATCH, 1, 1))
 R_WK = np.tile(R, (N_BATCH, 1, 1))
 WRENCHES = np.tile(WRENCH, (N_BATCH, 1))
+TRACKS = {"a": (np.arange(N_BATCH), P_C), 2: (np.arange(1, N_BATCH), P_C[1:] + 0.1)}
 
 # name -> (callable, valid arguments). Methods get a fresh object (or a filled one) per call.
 TARGETS = {
@@ -113,6 +114,9 @@ TARGETS = {
     "eye_to_hand_points.position_given_rotation": (points.position_given_rotation, ([S16], [P2], R)),
     "eye_to_hand_points.camera_given_points": (points.camera_given_points, ([S16], [P2])),
     "eye_to_hand_points.spread_off_line": (points.spread_off_line, (0.01 * np.eye(3),)),
+    "eye_to_hand_points.points_given_camera": (points.points_given_camera, ([S16], R, P)),
+    "eye_to_hand_points.refine_joint_weighted": (points.refine_joint_weighted, ([S16, S16], R, P, 10, 1e-3)),
+    "eye_to_hand_points.joint_covariance": (points.joint_covariance, ([S16, S16], R, P, [P2, P2], None)),
     "eye_to_hand_points.camera_after_turn": (points.camera_after_turn,
                                              (R, P, B0, Q0, B1, [], [], 5, 2, None)),
     "PayloadIdentifier": (PayloadIdentifier, (G, 1.0, None)),
@@ -122,6 +126,7 @@ TARGETS = {
     "payload.default_criteria": (payload.default_criteria, ()),
     "payload.build_A": (payload.build_A, (WRENCH, R, G, None)),
     "batch.calibrate_eye_to_hand": (batch.calibrate_eye_to_hand, (P_C, X_WH, None)),
+    "batch.calibrate_eye_to_hand_points": (batch.calibrate_eye_to_hand_points, (TRACKS, X_WH, None)),
     "batch.identify_payload": (batch.identify_payload, (WRENCHES, R_WK, G, None)),
     "batch.check_rotations": (batch.check_rotations, ("R", R_WK)),
     "batch.eye_to_hand_residuals": (batch.eye_to_hand_residuals, (X, P, P_C, X_WH)),
@@ -151,7 +156,7 @@ TARGETS = {
 # Result records, not checked (built by the API itself), and the checks themselves.
 NOT_TARGETS = {"EigenSolution", "Verdict", "SolutionProperties", "FormulationIdentifier", "EyeToHandEstimate",
                "EyeToHandSolution", "PayloadSolution", "CameraAfterTurn", "RotationProjection", "TouchPoint",
-               "Event", "EyeToHandResult", "PayloadResult", "IdentificationError"}
+               "Event", "EyeToHandResult", "EyeToHandPointsResult", "PayloadResult", "IdentificationError"}
 
 
 def _call(name: str, args: tuple):
@@ -278,6 +283,13 @@ BAD_CALLS = [
     _bad("observability.payload_covariance", 1, "n", "weight"),
     _bad("observability.payload_covariance", 2, np.ones(4), "x"),
     _bad("eye_to_hand_points.spread_off_line", 0, NAN3, "covariance"),
+    _bad("eye_to_hand_points.points_given_camera", 1, SCALED, "R_WC"),
+    _bad("eye_to_hand_points.points_given_camera", 0, [S16[:4]], "S_list[0]"),
+    _bad("eye_to_hand_points.refine_joint_weighted", 3, 0, "max_rounds"),
+    _bad("eye_to_hand_points.refine_joint_weighted", 4, -1.0, "tolerance"),
+    _bad("eye_to_hand_points.joint_covariance", 3, [P2], "p_HP"),
+    _bad("eye_to_hand_points.joint_covariance", 4, [1.0, -1.0], "weights"),
+    _bad("eye_to_hand_points.joint_covariance", 4, [1.0, np.nan], "weights"),
     _bad("eye_to_hand_points.camera_after_turn", 0, None, "R_WC0"),
     _bad("eye_to_hand_points.camera_after_turn", 2, ZERO_ROW, "b0"),
     _bad("eye_to_hand_points.camera_after_turn", 3, Q0[:5], "q0"),
@@ -287,6 +299,20 @@ BAD_CALLS = [
     _bad("batch.calibrate_eye_to_hand", 0, None, "p_C"),
     _bad("batch.calibrate_eye_to_hand", 1, X_WH[:, :3, :3], "X_WH"),
     _bad("batch.calibrate_eye_to_hand", 2, 5, "criteria"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, None, "points must be a mapping"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {}, "points must be a mapping"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {True: TRACKS["a"]}, "a label must be"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"": TRACKS["a"]}, "a label must be"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"a": P_C}, "points['a'] must be a pair"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"a": (np.arange(3), P_C[:3])}, "needs at least 4"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"a": (np.arange(N_BATCH), P_C[:, :2])}, "points['a'] p_C"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"a": (np.arange(N_BATCH - 1), P_C)}, "pair one to one"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"a": (np.arange(N_BATCH) + 1, P_C)}, "index of X_WH"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"a": (np.arange(N_BATCH) - 0.5, P_C)}, "not an index"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"a": (np.arange(N_BATCH) // 2, P_C)}, "sample 0 twice"),
+    _bad("batch.calibrate_eye_to_hand_points", 0, {"a": ([np.nan] * N_BATCH, P_C)}, "samples"),
+    _bad("batch.calibrate_eye_to_hand_points", 1, X_WH[:, :3, :3], "X_WH"),
+    _bad("batch.calibrate_eye_to_hand_points", 2, 5, "criteria"),
     _bad("batch.identify_payload", 2, "down", "gravity_W"),
     _bad("batch.identify_payload", 1, np.tile(SCALED, (N_BATCH, 1, 1)), "R_WK"),
     _bad("batch.check_rotations", 1, [1.0, 2.0, 3.0], "R"),

@@ -70,3 +70,29 @@ def test_swapped_pair_is_singled_out(poses, i, j):
     assert top_two == {i, j}
     others = np.delete(result.residuals, [i, j])
     assert min(result.residuals[i], result.residuals[j]) > 3 * others.max()
+
+
+def test_the_three_points_jointly(poses):
+    """The corner and the two codes at once (``all_points.csv``): converged; the camera is the
+    corner's within 0.5 mm and 0.05 deg (it weighs about 64 times a code: 0.5 mm against 4 mm of
+    noise), each code's own camera is within 2 of its own 1 sd of the joint one (measured 5.8 and
+    7.3 mm for 5.5 mm), and every point fits the joint camera within 5 % of its own RMS."""
+    from sustain_drake.identification import calibrate_eye_to_hand_points
+    from sustain_drake.recorded_data import read_point_tracks_csv
+
+    tracks = read_point_tracks_csv(DATA / "all_points.csv", num_samples=len(poses))
+    result = calibrate_eye_to_hand_points(tracks.points, poses)
+    assert result.converged, result.verdict
+    assert result.labels == ("corner", "aruco10", "aruco14") and result.labels[result.seed] == "corner"
+    corner = calibrate_eye_to_hand(points("corner"), poses)
+    assert np.linalg.norm(result.X_WC[:3, 3] - corner.X_WC[:3, 3]) <= 0.5e-3
+    assert rotation_error_deg(result.X_WC[:3, :3], corner.X_WC[:3, :3]) <= 0.05
+    for k, name in enumerate(result.labels):
+        alone = result.single[k]
+        assert alone.converged and alone.rms <= result.rms[k] <= 1.05 * alone.rms
+        rotation, position, _ = alone.standard_errors
+        offset = result.single_offsets()[k]
+        assert offset[0] <= 2.0 * position and offset[1] <= 2.0 * rotation, name
+    assert 40.0 <= result.weights[0] / result.weights[1:].max() <= 100.0
+    rotation, position, point_errors = result.standard_errors
+    assert position <= corner.standard_errors[1] and point_errors.max() <= 1e-3

@@ -6,7 +6,8 @@
 - ``eye_to_hand_points``: several points sharing one camera (joint refinement, the camera from
   known points, the camera after a turn).
 - ``payload``: the static payload formulation (N = 5) and the wrench sign convention.
-- ``batch``: ``calibrate_eye_to_hand`` and ``identify_payload`` for recorded data.
+- ``batch``: ``calibrate_eye_to_hand`` (one point), ``calibrate_eye_to_hand_points`` (several points
+  at once) and ``identify_payload`` for recorded data.
 - ``observability``: the checks that make a verdict honest on degenerate or mis-scaled data (what
   the motion determines, units and frames, agreement, uncertainty), their reasons, and covariances.
 - ``errors``: ``IdentificationError`` (a ``ValueError``), the only exception the API raises for a
@@ -14,9 +15,11 @@
 """
 
 from sustain_drake.identification.batch import (
+    EyeToHandPointsResult,
     EyeToHandResult,
     PayloadResult,
     calibrate_eye_to_hand,
+    calibrate_eye_to_hand_points,
     identify_payload,
 )
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
@@ -31,6 +34,7 @@ from sustain_drake.identification.sustainable_identifier import (
 __all__ = [
     "ConvergenceCriteria",
     "EyeToHandIdentifier",
+    "EyeToHandPointsResult",
     "EyeToHandResult",
     "IdentificationError",
     "PayloadIdentifier",
@@ -38,5 +42,6 @@ __all__ = [
     "SustainableIdentifier",
     "Verdict",
     "calibrate_eye_to_hand",
+    "calibrate_eye_to_hand_points",
     "identify_payload",
 ]

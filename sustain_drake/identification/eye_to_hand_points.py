@@ -2,7 +2,10 @@
 from one point; pure numpy): the joint Gauss-Newton refinement of the camera and every point's
 ``p_HP`` from their Eq. (30) statistics (``refine_joint``, ``rotation_levers``), the camera that known
 points give in closed form (``camera_given_points``, ``position_given_rotation``) and the camera
-after it turned, from the static scene's anchors and the known points (``camera_after_turn``).
+after it turned, from the static scene's anchors and the known points (``camera_after_turn``), and
+for recorded data (``batch.calibrate_eye_to_hand_points``) each point's ``p_HP`` under a known
+camera (``points_given_camera``), the joint fit with each point weighted by its own noise
+(``refine_joint_weighted``) and its covariance (``joint_covariance``).
 
 Every statistic is the 16 x 16 ``S`` of ``eye_to_hand`` (``x^T S x`` is the sum of squared Eq. (30)
 residuals, m^2); every public function raises ``IdentificationError`` with a one-line message for
@@ -346,3 +349,121 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
         p_WC = p_WC0 + R_WC0 @ p_C0C1
     rms = math.sqrt(float(np.mean(angle[inliers] ** 2)))
     return CameraAfterTurn(R_WC, p_WC, rms, int(np.count_nonzero(inliers)), from_scene)
+
+
+# ---- several points at once from recorded data (batch.calibrate_eye_to_hand_points) --------------
+# m^2 (1 um RMS): a point's residual variance below this is round-off (noise-free data); its weight
+# in the joint fit is taken against at least this, so noise-free points weigh alike.
+ROUND_OFF_VARIANCE = 1e-12
+
+
+def _counts(S_list: list[np.ndarray]) -> np.ndarray:
+    """The samples behind each statistic (A_t's p_WC block is I: ``S[9, 9]`` counts them)."""
+    return np.array([float(S[9, 9]) for S in S_list])
+
+
+def _squared_errors(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray):
+    """Each point's sum of squared Eq. (30) residuals ``x_k^T S_k x_k`` (m^2, >= 0)."""
+    return np.array([max(float(x @ S @ x), 0.0)
+                     for S, x in ((S, _pack_x(R, p_WC, p)) for S, p in zip(S_list, p_HP, strict=True))])
+
+
+def _points_given_camera(S_list: list[np.ndarray], R_WC: np.ndarray, p_WC: np.ndarray) -> np.ndarray:
+    P = np.zeros((len(S_list), 3))
+    x = _pack_x(R_WC, p_WC, np.zeros(3))
+    for k, S in enumerate(S_list):
+        if S[9, 9] > 0.0:  # S[12:15, 12:15] = sum R_WH^T R_WH = S[9, 9] I
+            P[k] = -(S[12:15, :] @ x) / S[9, 9]
+    return P
+
+
+def points_given_camera(S_list: list[np.ndarray], R_WC: np.ndarray, p_WC: np.ndarray) -> np.ndarray:
+    """The ``p_HP`` (K x 3) that best explains each point's samples when the camera is known: Eq. (35)'s
+    least squares in ``p_HP`` alone, the mean of ``R_WH^T (R_WC p_CP + p_WC - p_WH)`` over the point's
+    samples, from its raw statistic ``S_k`` (zeros for a point without samples). IdentificationError
+    unless ``S_list`` is a list of finite 16 x 16 statistics, ``R_WC`` a rotation matrix and ``p_WC``
+    a finite 3-vector."""
+    S_list = _statistics(S_list)
+    return _points_given_camera(S_list, rotation("R_WC", R_WC), real_array("p_WC", p_WC, VECTOR3))
+
+
+def _inverse_variance_weights(S_list, R, p_WC, p_HP) -> np.ndarray:
+    """Each point's weight: the inverse of its residual variance per axis under the fit,
+    ``x_k^T S_k x_k / (3 m_k - 3)`` (its own ``p_HP`` takes 3 of its ``3 m_k`` equations), floored at
+    ``ROUND_OFF_VARIANCE``; scaled so that the weighted samples number as many as the samples."""
+    m = _counts(S_list)
+    variance = _squared_errors(S_list, R, p_WC, p_HP) / np.maximum(3.0 * m - 3.0, 1.0)
+    weights = 1.0 / np.maximum(variance, ROUND_OFF_VARIANCE)
+    return weights * (m.sum() / float(weights @ m))
+
+
+def refine_joint_weighted(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray,
+                          max_rounds: int = 10, tolerance: float = 1e-3):  # fmt: skip
+    """The joint fit of K points fixed on the hand when each has its own noise (beyond the paper): the
+    maximum-likelihood camera and ``p_HP`` per point, by ``refine_joint`` on the statistics weighted
+    by the inverse of each point's residual variance (``x_k^T S_k x_k / (3 m_k - 3)`` per axis, ``m_k``
+    its samples; floored at ``ROUND_OFF_VARIANCE``), the variances found again under each new fit
+    until no weight changes by more than ``tolerance`` (relative) or after ``max_rounds`` fits.
+    Unweighted, a point measured with 4 mm of noise pulls the camera as hard as one measured with
+    0.5 mm (on the real data set the corner's residual grows from 0.50 to 0.73 mm RMS); weighted, each
+    pulls by what it knows. Starts from the camera ``(R, p_WC)`` (a single point's) with each point's
+    ``points_given_camera``. Returns ``(R_WC, p_WC, p_HP, weights)`` (``p_HP`` K x 3; the weights
+    scaled so that the weighted samples number as many as the samples), or None if the normal
+    equations are singular. IdentificationError unless ``S_list`` is a list of finite 16 x 16
+    statistics, ``R`` a rotation matrix, ``p_WC`` a finite 3-vector, ``max_rounds`` an integer >= 1
+    and ``tolerance`` a number >= 0."""
+    S_list = _statistics(S_list)
+    R, p_WC = rotation("R", R), real_array("p_WC", p_WC, VECTOR3)
+    max_rounds = integer("max_rounds", max_rounds, 1)
+    tolerance = real_number("tolerance", tolerance, what="a number >= 0")
+    if not tolerance >= 0.0:
+        raise IdentificationError(f"tolerance must be a number >= 0, got {tolerance}")
+    with np.errstate(all="ignore"):  # absurd magnitudes: no fit (None), never a NaN out
+        P = _points_given_camera(S_list, R, p_WC)
+        weights = _inverse_variance_weights(S_list, R, p_WC, P)
+        for _ in range(max_rounds):
+            if not np.isfinite(weights).all():
+                return None
+            fit = refine_joint([w * S for w, S in zip(weights, S_list, strict=True)], R, p_WC, P)
+            if fit is None:
+                return None
+            R, p_WC, P = fit
+            previous, weights = weights, _inverse_variance_weights(S_list, R, p_WC, P)
+            if np.abs(weights / previous - 1.0).max() <= tolerance:
+                break
+    return (R, p_WC, P, weights) if np.isfinite(weights).all() else None
+
+
+def joint_covariance(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray,
+                     weights=None) -> np.ndarray | None:  # fmt: skip
+    """Gauss-Newton's covariance ``sigma^2 H^-1`` ((6 + 3K) x (6 + 3K)) of the joint fit of K points'
+    raw statistics at the camera ``(R, p_WC)`` and the points ``p_HP`` (K x 3; the fit's optimum), in
+    ``(omega, p_WC, p_HP_1, ..., p_HP_K)``: ``omega`` the camera's turn in its own frame (rad; the truth
+    is ``R exp([omega x])``), positions in m. ``H = sum_k w_k J^T S_k J`` is ``refine_joint``'s normal
+    matrix of the weighted statistics and ``sigma^2 = sum_k w_k x_k^T S_k x_k / (3 n - 6 - 3K)``
+    (``n`` the samples of all points): with ``refine_joint_weighted``'s weights ``sigma^2`` is about
+    1 and each point counts with its own noise; one point with weight 1 gives
+    ``observability.eye_to_hand_covariance``. ``weights``: K positive numbers (None: all 1). None if
+    the fit is undetermined or ``3 n <= 6 + 3K``. IdentificationError unless ``S_list`` is a list of
+    finite 16 x 16 statistics, ``R`` a rotation matrix, ``p_WC`` a finite 3-vector, ``p_HP`` K finite
+    points and ``weights`` None or K finite positive numbers."""
+    S_list = _statistics(S_list)
+    K = len(S_list)
+    R, p_WC, p_HP = rotation("R", R), real_array("p_WC", p_WC, VECTOR3), _points("p_HP", p_HP, K)
+    w = np.ones(K) if weights is None else real_array("weights", weights, (K,), what=f"{K} positive numbers")
+    if not np.all(w > 0.0):
+        raise IdentificationError(f"weights must be {K} positive numbers, got {describe(weights)}")
+    dof = 3.0 * float(_counts(S_list).sum()) - 6.0 - 3.0 * K
+    if not (K > 0 and dof > 0.0):
+        return None
+    weighted = [wk * S for wk, S in zip(w, S_list, strict=True)]
+    H, _ = _joint_normal_equations(weighted, R, p_WC, p_HP)
+    try:
+        inverse = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return None
+    sigma2 = float(_squared_errors(weighted, R, p_WC, p_HP).sum()) / dof
+    covariance = sigma2 * (inverse + inverse.T) / 2.0
+    if not (np.isfinite(covariance).all() and np.all(np.diagonal(covariance) >= 0.0)):
+        return None
+    return covariance

@@ -6,7 +6,9 @@ Run from the repository root (needs the original files beside the repository, in
     .venv/bin/python tests/data/jin_eyetobase_rvc_single/convert.py
 
 Millimetres become metres; ``x y z roll pitch yaw`` flange poses become ``x,y,z,qw,qx,qy,qz``
-(through rotation matrices: pitch is near -pi/2, so angles are never averaged or compared).
+(through rotation matrices: pitch is near -pi/2, so angles are never averaged or compared). Each
+point gets its own ``x,y,z`` file (row i = sample i), and ``all_points.csv`` holds the three in the
+``sample,point,x,y,z`` format (points ``corner``, ``aruco10``, ``aruco14``) for the joint fit.
 """
 
 from pathlib import Path
@@ -14,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from sustain_drake.recorded_data import write_points_csv, write_poses_csv
+from sustain_drake.recorded_data import write_point_tracks_csv, write_points_csv, write_poses_csv
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE.parents[2].parent / "shared" / "data" / "jin_eyetobase_rvc_single"
@@ -35,9 +37,12 @@ def main():
             codes[int(row[0])].append(row[1:4])
     (HERE / "poses.csv").write_text(write_poses_csv(X_WH))
     (HERE / "corner_points.csv").write_text(write_points_csv(corner / 1000.0))
+    every = {"corner": (np.arange(n), corner / 1000.0)}
     for code, points in codes.items():
         assert len(points) == n, f"code {code}: {len(points)} rows"
         (HERE / f"aruco{code}_points.csv").write_text(write_points_csv(np.array(points) / 1000.0))
+        every[f"aruco{code}"] = (np.arange(n), np.array(points) / 1000.0)
+    (HERE / "all_points.csv").write_text(write_point_tracks_csv(every))
 
 
 if __name__ == "__main__":
