@@ -62,7 +62,7 @@ def renders():
 
 
 def test_every_tool_is_a_scenario_choice():
-    assert TOOL_MODELS == ("rod", "box", *WORKSHOP, "none")
+    assert TOOL_MODELS == ("rod", "box", *WORKSHOP, "charuco_board", "none")
     for model in TOOL_FILES:
         assert (models_dir() / TOOL_FILES[model]).is_file()
     assert load_scenario_string("tool: {model: speckle_bar}\n").tool.model == "speckle_bar"

@@ -8,6 +8,7 @@
 - ``payload``: the static payload formulation (N = 5) and the wrench sign convention.
 - ``batch``: ``calibrate_eye_to_hand`` (one point), ``calibrate_eye_to_hand_points`` (several points
   at once) and ``identify_payload`` for recorded data.
+- ``opencv_hand_eye``: OpenCV's hand-eye solvers fed for a fixed camera (the marker-based baseline).
 - ``observability``: the checks that make a verdict honest on degenerate or mis-scaled data (what
   the motion determines, units and frames, agreement, uncertainty), their reasons, and covariances.
 - ``errors``: ``IdentificationError`` (a ``ValueError``), the only exception the API raises for a

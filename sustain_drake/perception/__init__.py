@@ -9,6 +9,8 @@ Pure numpy + OpenCV (no pydrake import):
   rule (confirming motions and counter-evidence).
 - :mod:`.body_features`: the same confirming trials per tracked feature (which corners are body).
 - :mod:`.point_refinement`: drift-free 3-D points of tracked features (sub-pixel mark, robust depth).
+- :mod:`.charuco`: a ChArUco board's corners, its pose by PnP and from depth points (the
+  marker-based baseline).
 - :mod:`.camera_motion`: the camera notices its own motion from the static scene (beyond the paper).
 - :mod:`.evaluation`: per-cell ground truth from a label image, metrics, likelihood-map pictures.
 - :mod:`.synthetic`: synthetic per-cell signals for tests and benchmarks.

@@ -14,10 +14,12 @@ PACKAGE_NAME = "sustain_drake"
 # models/. Every SDF has the body ``tool`` (its frame is the tool frame T, at the grasp point) and
 # the frame ``tracked_point`` (the point the ground truth ``true_p_HP`` follows: the rod's and the
 # bars' tip, the box's far corner). The bars are the rod's 50 mm square at the grip, so one gripper
-# closing (``tool.gripper_position``) holds them all; models/generate_assets.py writes the bars.
+# closing (``tool.gripper_position``) holds them all; models/generate_assets.py writes the bars. The
+# ChArUco board (models/generate_charuco_board.py) is the marker-based baseline's target, on a handle
+# of the same grip; its frame ``charuco`` is OpenCV's board frame (``perception.charuco``).
 TOOL_FILES = {"rod": "rod_tool.sdf", "box": "box_tool.sdf", "wood_handle": "wood_handle_tool.sdf",
               "metal_bar": "metal_bar_tool.sdf", "speckle_bar": "speckle_bar_tool.sdf",
-              "plain_bar": "plain_bar_tool.sdf"}
+              "plain_bar": "plain_bar_tool.sdf", "charuco_board": "charuco_board_tool.sdf"}
 
 
 @dataclass(frozen=True)

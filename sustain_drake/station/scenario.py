@@ -87,8 +87,10 @@ class ToolConfig:
     # the held tool: "rod" (0.3 m, 0.1 kg, a black bar with a yellow checker), "box" (0.6 kg),
     # "wood_handle" (0.28 m, 0.49 kg: wood grain, two stickers, scratches), "metal_bar" (0.32 m,
     # 0.33 kg: red paint with slight wear, one logo), "speckle_bar" (0.3 m, 0.24 kg: a fine random
-    # speckle), "plain_bar" (0.3 m, 0.46 kg: one colour, only edges and ends show) or "none"; the
-    # bars are the rod's 50 mm square at the grip, their tip the tracked point as the rod's
+    # speckle), "plain_bar" (0.3 m, 0.46 kg: one colour, only edges and ends show), "charuco_board"
+    # (0.26 kg: a 5 x 7 ChArUco board of 30 mm squares on a 45-degree bracket, the marker-based
+    # baseline's target; its tracked point is a corner near its centre) or "none"; the bars and the
+    # board's handle are the rod's 50 mm square at the grip, the bars' tip the tracked point as the rod's
     model: str = "rod"
     # pose of the tool frame T in the grasp frame G (between the fingers, z along the approach)
     X_GT: Transform = field(default_factory=Transform)
