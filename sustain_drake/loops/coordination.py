@@ -131,16 +131,32 @@ def _checked(a: _Arguments) -> _Arguments:
     return a
 
 
+# px: Drake's VTK renderer samples pixel (u, v) at (u + 0.5, v + 0.5) of the pinhole model its
+# CameraInfo states (the OpenCV convention puts pixel centres at integers, the principal point of
+# a centred W x H camera at ((W - 1) / 2, (H - 1) / 2)): the rendered image lies half a pixel up and
+# left of it (RobotLocomotion/drake PR #10190, open). A depth edge shows it
+# (tests/test_coordination_camera_info.py); at 640 x 480 it turns every back-projected ray by 0.05 deg.
+VTK_RENDER_OFFSET_PX = 0.5
+
+
+def rendered_intrinsics(info: CameraInfo) -> CameraInfo:
+    """The intrinsics that describe the images Drake's VTK renderer makes for a camera of ``info``:
+    the principal point moved by ``-VTK_RENDER_OFFSET_PX`` in u and v."""
+    return CameraInfo(info.width(), info.height(), info.focal_x(), info.focal_y(),
+                      info.center_x() - VTK_RENDER_OFFSET_PX, info.center_y() - VTK_RENDER_OFFSET_PX)
+
+
 def camera_intrinsics(camera, argument: str = "camera_info") -> CameraInfo:
-    """The intrinsics of ``camera``: a ``pydrake.systems.sensors.CameraInfo`` as it is, or those of
-    a ``CameraConfig``'s colour camera (its width, height, focal lengths and principal point, as
-    ``CameraConfig.MakeCameras`` makes them; the config's ``fps`` is not read). Any other type raises
-    a one-line ``TypeError`` naming ``argument``."""
+    """The intrinsics of ``camera``: a ``pydrake.systems.sensors.CameraInfo`` as it is (a real
+    camera's calibration), or those of the images a simulated ``CameraConfig``'s colour camera
+    renders (its width, height and focal lengths as ``CameraConfig.MakeCameras`` makes them, its
+    principal point as the VTK renderer places it: ``rendered_intrinsics``; the config's ``fps`` is
+    not read). Any other type raises a one-line ``TypeError`` naming ``argument``."""
     if isinstance(camera, CameraInfo):
         return camera
     if isinstance(camera, CameraConfig):
         color_camera, _ = camera.MakeCameras()
-        return color_camera.core().intrinsics()
+        return rendered_intrinsics(color_camera.core().intrinsics())
     raise TypeError(f"{argument} must be a pydrake.systems.sensors.CameraInfo or CameraConfig, got "
                     f"{type(camera).__name__}")
 
