@@ -36,16 +36,16 @@ last entry is 1; the expected mean squared error ``a^2 lambda_N``). The measured
 of ``A_t`` like the kinematics, so noise in both is treated alike (on hardware the angular
 acceleration comes from differentiated encoders and is as noisy as the wrench). The bias is in
 the unknowns, not eliminated beforehand (e.g. by differencing samples): differencing doubles the
-noise and loses the samples' absolute gravity direction, and with the bias in ``x`` the observation
-rule compares each new sample with the whole model. The torque rows are divided by a length
-``torque_length`` (``DynamicPayloadIdentifier``), so every row is in newtons, with equal noise;
-the expected RMS (criterion (a)) is in N per sample.
+noise's variance and correlates successive rows (the statistic takes samples as independent), and
+with the bias in ``x`` the observation rule compares each new sample with the whole model. The
+torque rows are divided by a length ``torque_length`` (``DynamicPayloadIdentifier``), so every row
+is in newtons, with equal noise; the expected RMS (criterion (a)) is in N per sample.
 
 What the motion must do: the gravity direction in K must turn about two axes (else the mass and
 the force bias, the first moment and the torque bias are confounded: ``observability``'s
 ``ONE_ORIENTATION``), and K must turn with angular accelerations about all three axes (else the
 rotational inertia is unobservable: ``NO_ROTATION``, ``ONE_AXIS``). The verdict checks both from
-the statistic, then the estimate's uncertainty (``observability.dynamic_payload_covariance``).
+the statistic, then the estimate's uncertainty (``dynamic_observability``).
 
 Every public function and method raises ``IdentificationError`` (a ``ValueError``, see ``errors``)
 with a one-line message for an argument of the wrong type, shape or value.

@@ -2,7 +2,7 @@
 is compared with (issue 26), pure numpy.
 
 For a sample of ``M`` equations ``y_t = Y_t theta + e_t`` (``Y_t`` M x N) and a forgetting factor
-``lambda`` in (0, 1] (the textbook form, e.g. Ljung, System Identification, Eq. (11.63))::
+``lambda`` in (0, 1] (the textbook form of exponentially weighted least squares)::
 
     K_t     = P_{t-1} Y_t^T (lambda I_M + Y_t P_{t-1} Y_t^T)^-1
     theta_t = theta_{t-1} + K_t (y_t - Y_t theta_{t-1})

@@ -40,8 +40,8 @@ class SensorKinematicsFromPlant(LeafSystem):
     velocities are the state it ended in. So the kinematics are reported at the step's start: the
     orientation turned back by the step, ``R_WK exp(-h [w_WK_K x])``, and ``w - h alpha``. (Read at
     the step's end, the gravity direction is one step late: at 1.7 rad/s and ``h`` = 2 ms that is a
-    3 mN m error in the box's torque, six times the sensor's noise; it biases the identified inertia
-    by 20-40 %.) A continuous plant needs no such correction.
+    3 mN m error in the box's torque, six times the sensor's noise, and errors of tens of per cent in
+    the identified inertia.) A continuous plant needs no such correction.
     """
 
     def __init__(self, plant, sensor_frame, period: float):
