@@ -4,10 +4,12 @@
   is the pose of the camera body B in its parent frame (``world`` for a fixed camera). Drake's
   camera body frame is the optical frame the points were measured in (+z along the optical axis,
   +x right, +y down), so ``X_PB = X_WC``.
-- The payload (§4.4) as a YAML spatial inertia about the sensor frame K's origin, in K. A static
-  identification gives the mass and the centre of mass only; the rotational inertia about the
-  centre of mass is not observable from static wrenches, so it is written as zero (a point mass)
-  unless the caller gives one (e.g. from the object's shape).
+- The payload (§4.4) as a YAML spatial inertia about the sensor frame K's origin, in K: the mass,
+  the centre of mass and the rotational inertia about the centre of mass. The dynamic
+  identification (``identification.payload_dynamic``) identifies that inertia and it is written as
+  identified; the static one gives the mass and the centre of mass only (static wrenches do not
+  reveal the inertia), and the inertia is then written as zero (a point mass) unless the caller
+  gives one (e.g. from the object's shape).
 
 Everything written or loaded here is checked first: a pose must be a proper rigid transform
 (finite, rotation orthonormal within ``ROTATION_TOLERANCE`` with determinant +1, last row
@@ -29,6 +31,8 @@ from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.math import RigidTransform
 from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 from pydrake.systems.sensors import CameraConfig
+
+from sustain_drake.identification.payload_dynamic import inertia_matrix, physical_inertia_problem
 
 # Largest |R^T R - I| entry accepted for a rotation matrix (the rotation is then re-orthonormalized).
 ROTATION_TOLERANCE = 1e-6
@@ -100,7 +104,8 @@ class SpatialInertiaConfig:
     def validate(self) -> None:
         """Raises ``CalibrationExportError`` unless this is a physically valid spatial inertia: a
         non-empty ``frame``, ``mass`` finite > 0, ``p_BoBcm`` 3 finite values, ``I_BBcm`` 6 finite
-        values whose principal moments are >= 0 and satisfy the triangle inequality."""
+        values: all zero (a point mass) or positive definite with each principal moment at most the
+        sum of the other two (the triangle inequalities)."""
         if not isinstance(self.frame, str) or not self.frame:
             raise CalibrationExportError(f"payload frame must be a non-empty string, got {self.frame!r}")
         mass = _number(self.mass, "payload mass")
@@ -121,9 +126,14 @@ class SpatialInertiaConfig:
 def payload_yaml(mass: float, p_KCm, frame: str = "sensor", I_BBcm=None) -> str:
     """The identified payload as a ``SpatialInertiaConfig`` YAML (about K's origin, in K).
 
+    ``I_BBcm`` is the rotational inertia about the centre of mass, in K (``[I_xx, I_yy, I_zz, I_xy,
+    I_xz, I_yz]``, kg m^2): the dynamic identification's (``DynamicPayloadSolution.I_BBcm``), or
+    None for a static one (written as zeros: a point mass).
+
     Raises:
         CalibrationExportError: the mass is not finite and positive, ``p_KCm`` is not 3 finite
-            values, or ``I_BBcm`` is not 6 finite values of a physically valid inertia.
+            values, or ``I_BBcm`` is not 6 finite values of a physically valid inertia (positive
+            definite, the triangle inequalities), checked before anything is written.
     """
     mass = _number(mass, "payload mass")
     if not mass > 0:
@@ -283,14 +293,15 @@ def _vector(values, n: int, what: str) -> list[float]:
 
 
 def _rotational_inertia(values) -> RotationalInertia:
+    """The ``RotationalInertia`` of 6 values: zeros (a point mass) or a rigid body's (positive
+    definite, the triangle inequalities), else ``CalibrationExportError``."""
     moments_products = _vector(values, 6, "payload I_BBcm")
-    inertia = RotationalInertia(*moments_products)
-    if not inertia.CouldBePhysicallyValid():
-        raise CalibrationExportError(
-            f"payload I_BBcm {moments_products} is not a physically valid rotational inertia: the "
-            "principal moments must be >= 0 and each at most the sum of the other two"
-        )
-    return inertia
+    if any(moments_products):
+        problem = physical_inertia_problem(inertia_matrix(moments_products))
+        if problem is not None:
+            raise CalibrationExportError(
+                f"payload I_BBcm {moments_products} is not physically valid: {problem}")
+    return RotationalInertia(*moments_products)
 
 
 def _yaml_problem(e: yaml.YAMLError) -> str:

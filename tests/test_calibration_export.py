@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.sensors import CameraConfig
+from scipy.spatial.transform import Rotation
 
 from sustain_drake.calibration_export import (
     CalibrationExportError,
@@ -19,6 +20,7 @@ from sustain_drake.calibration_export import (
     load_payload,
     payload_yaml,
 )
+from sustain_drake.identification import payload_dynamic as pd
 
 
 def test_camera_config_round_trip_keeps_the_pose_and_the_base_settings():
@@ -44,6 +46,27 @@ def test_payload_round_trip():
     assert np.allclose(M.get_com(), [0.01, -0.02, 0.15])
     with pytest.raises(ValueError, match="positive"):
         payload_yaml(-1.0, [0, 0, 0])
+
+
+def test_payload_round_trip_with_the_identified_inertia():
+    """A dynamic identification's payload keeps its rotational inertia through the YAML, and Drake
+    reads the same spatial inertia back."""
+    rng = np.random.default_rng(0)
+    R = Rotation.from_euler("xyz", [0.3, -0.2, 0.9]).as_matrix()
+    I_cm = R @ np.diag([0.0019, 0.0027, 0.0031]) @ R.T
+    phi, bias = pd.inertial_parameters(0.6, [0.01, -0.02, 0.07], I_cm), rng.normal(0.0, 0.3, 6)
+    identifier = pd.DynamicPayloadIdentifier()
+    for R_WK in Rotation.random(60, random_state=rng).as_matrix():
+        w, alpha, a = rng.normal(0, 1, 3), rng.normal(0, 4, 3), rng.normal(0, 2, 3)
+        k = pd.sensor_kinematics(R_WK, w, alpha, a, [0, 0, -9.81])
+        identifier.add(pd.predicted_wrench(phi, bias, k), k)
+    solution = identifier.solve()
+    assert solution.verdict.converged, solution.verdict
+    config = load_payload(payload_yaml(solution.mass, solution.p_KCm, I_BBcm=solution.I_BBcm))
+    M = config.spatial_inertia()
+    assert M.get_mass() == pytest.approx(0.6) and np.allclose(M.get_com(), [0.01, -0.02, 0.07], atol=1e-12)
+    I_Bo = M.CalcRotationalInertia().CopyToFullMatrix3()  # about K's origin
+    assert np.allclose(I_Bo, pd.inertia_matrix(phi[4:]), atol=1e-12)
 
 
 def test_the_calibrate_command_writes_a_camera_config(tmp_path):
@@ -188,7 +211,9 @@ BAD_PAYLOADS = {
     "two coordinates": ((1.0, [0, 0]), {}, "p_KCm must be 3 numbers"),
     "a NaN inertia": ((1.0, [0, 0, 0]), {"I_BBcm": [np.nan, 1, 1, 0, 0, 0]}, "NaN or inf"),
     "a negative moment": ((1.0, [0, 0, 0]), {"I_BBcm": [-1, 1, 1, 0, 0, 0]}, "physically valid"),
-    "no triangle inequality": ((1.0, [0, 0, 0]), {"I_BBcm": [1, 1, 5, 0, 0, 0]}, "physically valid"),
+    "no triangle inequality": ((1.0, [0, 0, 0]), {"I_BBcm": [1, 1, 5, 0, 0, 0]}, "triangle inequality"),
+    "a semidefinite inertia": ((1.0, [0, 0, 0]), {"I_BBcm": [1, 1, 0, 0, 0, 0]}, "not positive definite"),
+    "products too large": ((1.0, [0, 0, 0]), {"I_BBcm": [1, 1, 1, 2, 0, 0]}, "physically valid"),
 }
 
 

@@ -3,7 +3,9 @@
 Headless by default, with a progress bar in simulated seconds (on a terminal). Writes, in the
 output folder: ``replay.html`` (a self-contained Meshcat recording, open it in a browser),
 ``log.npz`` (the station's vector outputs sampled at ``--log-rate``; poses as 4x4 matrices) and,
-with an experiment enabled, ``metrics.json`` (see ``experiments.run``).
+with an experiment enabled, ``metrics.json`` (see ``experiments.run``); the kinesthetic experiment
+also writes the identified payload, ``payload.yaml`` (``calibration_export.payload_yaml``: with its
+rotational inertia in the dynamic mode).
 
 Before the run: the scenario is loaded and checked, and the output folder is created and checked
 writable, so a bad input or folder costs no simulation. After a successful run, the outputs of an
@@ -30,7 +32,7 @@ from sustain_drake.station.scenario_files import SEED_START_SPREAD, scenario_lab
 
 # What a run writes in its folder (experiments.run and the experiments' finish): glob patterns.
 RUN_OUTPUTS = ("replay.html", "log.npz", "metrics.json", "likelihood_*.png", "body_vs_truth.png",
-               "hand_eye_fig9.png", "kinesthetic_*.png")
+               "hand_eye_fig9.png", "kinesthetic_*.png", "payload.yaml")
 
 
 def register(subparsers) -> None:

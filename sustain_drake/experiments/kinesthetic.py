@@ -1,5 +1,7 @@
-"""Kinesthetic coordination (paper §3.5, §4.4): the held object's mass and centre of mass from the
-wrist wrench, decided by the identify <-> observe loop, then touches estimated on it.
+"""Kinesthetic coordination (paper §3.5, §4.4): the held object's mass and centre of mass (and, in the
+dynamic mode, its rotational inertia and the sensor's bias) from the wrist wrench, decided by the
+identify <-> observe loop, then touches estimated on it. The adopted payload is written as
+``payload.yaml`` (``calibration_export.payload_yaml``).
 
 The loop: ``QuasiStaticGate`` (joint encoders, touch flag) -> ``sample_valid`` of a
 ``SustainableIdentifierSystem`` with the ``PayloadFormulation`` (station ``wrench`` and the sensor
@@ -22,8 +24,10 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
+from sustain_drake.calibration_export import CalibrationExportError, payload_yaml
 from sustain_drake.files import write_atomically
-from sustain_drake.identification import coordination
+from sustain_drake.identification import coordination, payload_dynamic
+from sustain_drake.identification.payload_dynamic import DynamicPayloadSolution
 from sustain_drake.loops.payload import add_payload_loop
 from sustain_drake.station import held_shape, sensor_pose_in_hand
 from sustain_drake.station.scenario import arm_of
@@ -41,6 +45,7 @@ class KinestheticHandle:
     estimator: TouchEstimator
     loggers: dict[str, VectorLogSink]
     eval_min_force: float
+    true_bias: np.ndarray  # the wrench sensor's bias [b_tau; b_f] (the dynamic mode identifies it)
 
 
 def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> KinestheticHandle:
@@ -56,7 +61,12 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
     wrench, X_WK = station.GetOutputPort("wrench"), station.GetOutputPort("X_WH")  # K = H
     for system in (ident, estimator):
         builder.Connect(wrench, system.GetInputPort("wrench"))
-        builder.Connect(X_WK, system.GetInputPort("X_WK"))
+    builder.Connect(X_WK, estimator.GetInputPort("X_WK"))
+    dynamic = config.mode == "dynamic"
+    if dynamic:  # the sensor frame's kinematics from the plant, at the wrench's instants
+        builder.Connect(station.GetOutputPort("sensor_kinematics"), ident.GetInputPort("kinematics_K"))
+    else:
+        builder.Connect(X_WK, ident.GetInputPort("X_WK"))
     builder.Connect(station.GetOutputPort("joint_velocities"), gate.GetInputPort("joint_velocities"))
     builder.Connect(sm.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     if station.HasInputPort("touch_start"):
@@ -73,11 +83,13 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
         "true_tool_mass": station.GetOutputPort("true_tool_mass"),
         "true_p_KCm": station.GetOutputPort("true_p_KCm"),
         "true_touch": station.GetOutputPort("true_touch"),
+        "true_outboard_inertia": station.GetOutputPort("true_outboard_inertia"),
     }  # fmt: skip
     if station.HasOutputPort("touch_phase"):
         sources["touch_phase"] = station.GetOutputPort("touch_phase")
     loggers = {name: LogVectorOutput(port, builder, period) for name, port in sources.items()}
-    return KinestheticHandle(ident, sm, estimator, loggers, config.eval_min_force)
+    return KinestheticHandle(ident, sm, estimator, loggers, config.eval_min_force,
+                             np.array(scenario.wrench_sensor.bias, dtype=float))
 
 
 def _logs(handle: KinestheticHandle, context):
@@ -132,6 +144,9 @@ def finish(handle: KinestheticHandle, diagram, context, out_dir) -> dict:
     if converged and adopted is not None:
         k = min(int(np.searchsorted(t, converged[0].time)), t.size - 1)
         m_true, p_true = float(logs["true_tool_mass"][k, 0]), logs["true_p_KCm"][k]
+        if isinstance(adopted, DynamicPayloadSolution):  # the whole outboard body, and the sensor's bias
+            metrics["dynamic"] = dynamic_errors(adopted, logs["true_outboard_inertia"][k], handle.true_bias)
+            m_true, p_true = metrics["dynamic"]["true_mass_kg"], np.array(metrics["dynamic"]["true_p_KCm_m"])
         metrics.update({
             "mass_kg": adopted.mass, "true_mass_kg": m_true,
             "mass_error_percent": 100.0 * abs(adopted.mass - m_true) / m_true,
@@ -145,6 +160,7 @@ def finish(handle: KinestheticHandle, diagram, context, out_dir) -> dict:
         "converged": final.verdict.converged, "reason": final.verdict.reason, "samples": final.num_samples,
         "mass_kg": final.mass, "p_KCm_m": final.p_KCm.tolist(),
     }  # fmt: skip
+    metrics["payload_yaml"] = _write_payload(adopted if converged else None, out_dir)
     metrics["touch"] = touch_errors(logs, handle.eval_min_force)
     if "touch_phase" in logs:
         metrics["touch"]["touches_felt"] = int(logs["touch_phase"][-1, 2])
@@ -153,6 +169,36 @@ def finish(handle: KinestheticHandle, diagram, context, out_dir) -> dict:
     _plot(logs, converged[0].time if converged else None, handle.eval_min_force, out_dir)
     metrics["figures"] = ["kinesthetic_eigenvalues.png", "kinesthetic_touch_points.png"]
     return _finite(metrics)
+
+
+def dynamic_errors(adopted: DynamicPayloadSolution, true_phi: np.ndarray, true_bias: np.ndarray) -> dict:
+    """The dynamic payload's errors against the outboard body's true inertial parameters ``true_phi``
+    (``identification.payload_dynamic``) and the sensor's true bias: the rotational inertia's about
+    the centre of mass (spectral norm) in % of its largest principal moment, the bias's largest."""
+    m, p, I_Cm = payload_dynamic.central_inertia(true_phi)
+    inertia_error = float(np.linalg.norm(adopted.I_Cm_K - I_Cm, 2) / np.linalg.eigvalsh(I_Cm)[-1])
+    return {
+        "true_mass_kg": m, "true_p_KCm_m": p.tolist(), "I_BBcm": adopted.I_BBcm.tolist(),
+        "true_I_BBcm": payload_dynamic.moments_products(I_Cm).tolist(),
+        "inertia_error_percent": 100.0 * inertia_error,
+        "bias": adopted.bias.tolist(),
+        "bias_error_N": float(np.abs(adopted.bias[3:] - true_bias[3:]).max()),
+        "bias_error_Nm": float(np.abs(adopted.bias[:3] - true_bias[:3]).max()),
+    }  # fmt: skip
+
+
+def _write_payload(adopted, out_dir: Path) -> str:
+    """Writes the adopted payload as ``payload.yaml`` (a spatial inertia about K's origin, in K; with
+    the identified rotational inertia in the dynamic mode, a point mass in the static one): its file
+    name, or why nothing was written (no payload adopted, or not physically valid: one line)."""
+    if adopted is None:
+        return "not written: no payload was identified"
+    try:
+        text = payload_yaml(adopted.mass, adopted.p_KCm, I_BBcm=getattr(adopted, "I_BBcm", None))
+    except CalibrationExportError as e:
+        return f"not written: {e}"
+    write_atomically(out_dir / "payload.yaml", text)
+    return "payload.yaml"
 
 
 def _finite(value):

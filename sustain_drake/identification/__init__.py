@@ -6,6 +6,10 @@
 - ``eye_to_hand_points``: several points sharing one camera (joint refinement, the camera from
   known points, the camera after a turn).
 - ``payload``: the static payload formulation (N = 5) and the wrench sign convention.
+- ``payload_dynamic``: the dynamic payload formulation (N = 17: the ten inertial parameters and the
+  wrench sensor's bias, from the Newton-Euler regressor); ``dynamic_observability`` its verdict's
+  checks; ``rls`` the recursive least-squares baseline; ``differentiation`` the Savitzky-Golay
+  filter that differentiates joint encoders.
 - ``batch``: ``calibrate_eye_to_hand`` (one point), ``calibrate_eye_to_hand_points`` (several points
   at once) and ``identify_payload`` for recorded data.
 - ``opencv_hand_eye``: OpenCV's hand-eye solvers fed for a fixed camera (the marker-based baseline).

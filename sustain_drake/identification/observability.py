@@ -57,7 +57,8 @@ say converged. A verdict applies them in this order:
    of mass's RMS error is within ``MAX_COM_ERROR`` (10 mm).
 
 A not-converged verdict's reason starts with one of the constants below (``REASONS``), then gives
-the figures and what to do.
+the figures and what to do. The dynamic payload's checks (``payload_dynamic``) are in
+``dynamic_observability``, with these reasons.
 """
 
 from __future__ import annotations

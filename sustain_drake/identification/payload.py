@@ -126,6 +126,21 @@ class PayloadSolution(SolutionProperties):
         """No rotation in this formulation: always 0 (kept for a uniform solution interface)."""
         return 0.0
 
+    @property
+    def static_x(self) -> np.ndarray:
+        """``x`` itself: ``[1/m; p_KCm; 1]`` (the dynamic solution has the same property)."""
+        return self.x
+
+    @property
+    def bias(self) -> np.ndarray:
+        """The wrench sensor's bias: zeros (this formulation has none; the dynamic one identifies it)."""
+        return np.zeros(6)
+
+    @property
+    def mass_com_covariance(self) -> np.ndarray | None:
+        """The covariance (4 x 4) of ``(mass, p_KCm)``: ``covariance``."""
+        return self.covariance
+
 
 class PayloadIdentifier(FormulationIdentifier):
     """The sustainable identifier with the static payload formulation.

@@ -19,6 +19,7 @@ from sustain_drake.loops.inspection import add_inspection
 from sustain_drake.loops.payload import KinestheticConfig, add_payload_loop
 from sustain_drake.systems.coordination_outputs import AdoptedEstimates, InputsConnected, RequiredInput
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
+from sustain_drake.systems.sensor_kinematics import SensorKinematicsFromEncoders
 
 __all__ = ["AdoptedEstimates", "Loops", "camera_intrinsics", "joint_ranges_from_limits",
            "make_sustainable_coordination"]
@@ -112,6 +113,9 @@ def _checked(a: _Arguments) -> _Arguments:
         raise ValueError(f"{OWNER}: fps must be > 0 frames per second, got {a.fps!r}")
     if a.plant is not None and a.hand_frame is None:
         raise ValueError(f"{OWNER}: a plant needs its hand_frame")
+    if a.loops.payload and a.kinesthetic is not None and a.kinesthetic.mode != "static" and a.plant is None:
+        raise ValueError(f"{OWNER}: kinesthetic.mode {a.kinesthetic.mode!r} needs plant= and hand_frame= "
+                         "(the sensor's kinematics come from the joint encoders through the arm's plant)")
     if a.plant is None and not (a.hand_frame is None and a.sensor_frame is None and a.model_instance is None):
         raise ValueError(f"{OWNER}: hand_frame, sensor_frame and model_instance need a plant")
     if a.plant is not None:
@@ -234,7 +238,10 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
     the capture time; unconnected: every frame is new), ``joint_positions`` and
     ``joint_velocities`` (``num_joints``, rad and rad/s; velocities gate the quasi-static wrench
     samples), ``X_WH`` (RigidTransform), ``wrench`` (6, ``[tau_K; f_K]`` applied by the wrist on the
-    outboard side, N m and N, in K; see ``identification.payload``). Every input but
+    outboard side, N m and N, in K; see ``identification.payload``). With ``kinesthetic.mode``
+    ``dynamic`` (it needs ``plant``) the payload loop identifies the rotational inertia and the
+    sensor's bias too, from every sample, the sensor's kinematics computed from ``joint_positions``
+    (``SensorKinematicsFromEncoders``: read with the wrench, every ``kinesthetic.period``). Every input but
     ``image_time`` is required: one left unconnected stops the simulation's initialization with a
     one-line ``RuntimeError`` naming the port and what to connect (``InputsConnected``).
 
@@ -315,10 +322,7 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
     if vision is not None:
         builder.Connect(X_WH, vision.candidates.GetInputPort("X_WH"))
     if payload is not None:
-        for system in (payload.identifier, payload.estimator):
-            if system is not None:
-                inputs["wrench"].append(system.GetInputPort("wrench"))
-                builder.Connect(X_WK, system.GetInputPort("X_WK"))
+        _connect_payload(builder, a, payload, X_WK, inputs)
     for name, ports in inputs.items():
         _export_input(builder, name, ports)
     _export_outputs(builder, vision, payload)
@@ -353,6 +357,32 @@ def _hand_poses(builder, a: _Arguments, inputs: dict) -> tuple:
     passthrough = builder.AddSystem(_PosePassThrough())
     inputs["X_WH"].append(passthrough.get_input_port())
     return passthrough.get_output_port(), passthrough.get_output_port()
+
+
+def _connect_payload(builder, a: _Arguments, payload, X_WK, inputs: dict) -> None:
+    """The payload loop's sensor inputs: the wrench and the sensor pose (static mode), or the wrench
+    and the sensor's kinematics from the joint encoders through the plant (dynamic mode:
+    ``SensorKinematicsFromEncoders``, the wrench delayed with them)."""
+    if payload.estimator is not None:
+        inputs["wrench"].append(payload.estimator.GetInputPort("wrench"))
+        builder.Connect(X_WK, payload.estimator.GetInputPort("X_WK"))
+    if a.kinesthetic.mode == "static":
+        inputs["wrench"].append(payload.identifier.GetInputPort("wrench"))
+        builder.Connect(X_WK, payload.identifier.GetInputPort("X_WK"))
+        return
+    d = a.kinesthetic.dynamic
+    joints = None
+    if a.model_instance is not None:
+        joints = sorted((a.plant.get_joint(j) for j in a.plant.GetJointIndices(a.model_instance)
+                         if a.plant.get_joint(j).num_positions() > 0), key=lambda j: j.position_start())
+    encoders = builder.AddSystem(SensorKinematicsFromEncoders(
+        a.plant, a.sensor_frame or a.hand_frame, a.kinesthetic.period, d.encoder_window, d.encoder_order,
+        joints, d.wrench_delay))  # fmt: skip
+    encoders.set_name("sensor_kinematics_from_encoders")
+    inputs["joint_positions"].append(encoders.GetInputPort("joint_positions"))
+    inputs["wrench"].append(encoders.GetInputPort("wrench"))
+    for name, target in (("wrench_aligned", "wrench"), ("kinematics_K", "kinematics_K")):
+        builder.Connect(encoders.GetOutputPort(name), payload.identifier.GetInputPort(target))
 
 
 def _export_input(builder, name: str, ports: list) -> None:

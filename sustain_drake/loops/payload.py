@@ -1,17 +1,20 @@
 """The payload loop (paper §3.5, §4.4): its settings as the ``kinesthetic`` scenario section, and its
-wiring: quasi-static gate -> payload identifier (Eqs. (37)-(38)) <-> its state machine, and the touch
-estimator on the held object."""
+wiring: quasi-static gate -> payload identifier (static: Eqs. (37)-(38); dynamic: the Newton-Euler
+regressor of ``identification.payload_dynamic``) <-> its state machine, and the touch estimator on
+the held object."""
 
 # No "from __future__ import annotations": yaml_load_typed needs the real field types.
 import dataclasses
 from dataclasses import dataclass, field
 
 from pydrake.math import RigidTransform
+from pydrake.systems.primitives import ConstantVectorSource
 
 from sustain_drake.loops.identify_observe import CoordinationConfig, connect_identify_observe
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.quasi_static_gate import QuasiStaticGate
 from sustain_drake.systems.sustainable_identifier_system import (
+    DynamicPayloadFormulation,
     PayloadFormulation,
     SustainableIdentifierSystem,
 )
@@ -37,12 +40,34 @@ class QuasiStaticConfig:
     max_touch_duration: float = 20.0
 
 
+# The payload identification's modes (``KinestheticConfig.mode``).
+PAYLOAD_MODES = ("static", "dynamic")
+
+
+@dataclasses.dataclass
+class DynamicPayloadConfig:
+    """The dynamic payload mode's settings (``identification.payload_dynamic``)."""
+
+    # m: the torque rows are divided by it: the sensor's torque noise over its force noise (ATI Mini40)
+    torque_length: float = 0.025
+    # samples (odd) of the Savitzky-Golay filter that differentiates the joint encoders (hardware)
+    encoder_window: int = 11
+    encoder_order: int = 3  # degree of that filter's polynomial (2 or more, less than the window)
+    # s: how much earlier than the joint positions read with it the wrench was measured (hardware)
+    wrench_delay: float = 0.0
+
+
 @dataclasses.dataclass
 class KinestheticConfig:
     """Payload identification from the wrist wrench and touch estimation on the held object."""
 
     enabled: bool = False  # run payload identification and touch estimation on the scenario's world
-    # convergence and observation; max_expected_rms 0.3 (m/s^2, N m) is about 3 % of g
+    # static: mass and centre of mass from quasi-static samples (Eqs. (37)-(38)); dynamic: mass,
+    # centre of mass, rotational inertia and the wrench sensor's bias from every sample, moving or not
+    mode: str = "static"
+    # the dynamic mode's settings
+    dynamic: DynamicPayloadConfig = field(default_factory=DynamicPayloadConfig)
+    # convergence and observation; max_expected_rms 0.3 (static: m/s^2 and N m, about 3 % of g; dynamic: N)
     coordination: CoordinationConfig = field(default_factory=_payload_coordination)
     period: float = 0.01  # s between identifier and state-machine updates: the wrench sensor's 100 Hz
     # when a wrench sample is quasi-static enough to identify from
@@ -62,22 +87,41 @@ class PayloadLoop:
     estimator: TouchEstimator | None
 
 
+def payload_formulation(config: KinestheticConfig):
+    """The identifier's formulation of ``config.mode``: ``PayloadFormulation`` (static) or
+    ``DynamicPayloadFormulation``, with the criteria of ``config.coordination``. ValueError for an
+    unknown mode."""
+    c = config.coordination
+    criteria = c.criteria(has_rotation=False)
+    if config.mode == "static":
+        return PayloadFormulation(criteria=criteria, forgetting_factor=c.forgetting_factor)
+    if config.mode == "dynamic":
+        return DynamicPayloadFormulation(criteria, c.forgetting_factor, config.dynamic.torque_length)
+    raise ValueError(f"kinesthetic.mode must be one of {', '.join(PAYLOAD_MODES)}, got {config.mode!r}")
+
+
 def add_payload_loop(builder, num_joints: int, config: KinestheticConfig, shape=None,
                      X_KG: RigidTransform | None = None) -> PayloadLoop:  # fmt: skip
     """Adds the payload identifier, its state machine, the quasi-static gate and (if ``shape``, the
     held object's ``pydrake.geometry`` shape at ``X_KG`` in the sensor frame) the touch estimator,
-    connected to each other. Left for the caller: ``wrench`` and ``X_WK`` of the identifier and
-    the estimator, the gate's ``joint_velocities``, the use of ``state_machine.pause``."""
+    connected to each other. Left for the caller: ``wrench`` and ``X_WK`` (static mode) or
+    ``wrench`` and ``kinematics_K`` (dynamic mode) of the identifier, ``wrench`` and ``X_WK`` of the
+    estimator, the gate's ``joint_velocities``, the use of ``state_machine.pause``.
+
+    In the dynamic mode the gate keeps only touched samples out (moving samples count), and the
+    touch estimator, whose prediction stays quasi-static, declares a touch on its residual force
+    alone (``min_touch_force``): its allowable error is 0, since the identification's is in the
+    dynamic formulation's units."""
     c, qs = config.coordination, config.quasi_static
-    ident = builder.AddSystem(SustainableIdentifierSystem(
-        PayloadFormulation(criteria=c.criteria(has_rotation=False), forgetting_factor=c.forgetting_factor),
-        period=config.period))  # fmt: skip
+    formulation = payload_formulation(config)
+    ident = builder.AddSystem(SustainableIdentifierSystem(formulation, period=config.period))
     ident.set_name("payload_identifier")
-    sm = builder.AddSystem(CoordinationStateMachine(PayloadFormulation.num_unknowns, c.rule(), config.period))
+    sm = builder.AddSystem(CoordinationStateMachine(formulation.num_unknowns, c.rule(), config.period))
     sm.set_name("payload_coordination")
+    static = config.mode == "static"
     gate = builder.AddSystem(QuasiStaticGate(
         num_joints, config.period, qs.max_joint_speed, qs.max_joint_acceleration, qs.window, qs.touch_holdoff,
-        qs.max_touch_duration))  # fmt: skip
+        qs.max_touch_duration, require_still=static))  # fmt: skip
     gate.set_name("quasi_static_gate")
     estimator = None
     if shape is not None:
@@ -86,7 +130,10 @@ def add_payload_loop(builder, num_joints: int, config: KinestheticConfig, shape=
         # A touch keeps its samples out of the identifier (see QuasiStaticGate).
         builder.Connect(estimator.GetOutputPort("touch"), gate.GetInputPort("touch"))
         builder.Connect(sm.GetOutputPort("adopted_solution"), estimator.GetInputPort("payload"))
-        builder.Connect(sm.GetOutputPort("allowable_error"), estimator.GetInputPort("allowable_error"))
+        sigma = sm.GetOutputPort("allowable_error")
+        if not static:
+            sigma = builder.AddSystem(ConstantVectorSource([0.0])).get_output_port()
+        builder.Connect(sigma, estimator.GetInputPort("allowable_error"))
     builder.Connect(gate.GetOutputPort("sample_valid"), ident.GetInputPort("sample_valid"))
     connect_identify_observe(builder, ident, sm)
     return PayloadLoop(ident, sm, gate, estimator)

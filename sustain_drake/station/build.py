@@ -52,6 +52,7 @@ from sustain_drake.systems.distractor import DistractorPath
 from sustain_drake.systems.disturbances import DisturbanceScheduler, Push, Step
 from sustain_drake.systems.ground_truth import GroundTruth, PointMass
 from sustain_drake.systems.motion_generator import MotionGenerator
+from sustain_drake.systems.sensor_kinematics import SensorKinematicsFromPlant
 from sustain_drake.systems.touch_motion import TouchMotion
 from sustain_drake.systems.wrench_sensor import GripperCompensation, WristWrenchSensor
 
@@ -80,7 +81,8 @@ EXPORTED_OUTPUTS = (
     "joint_positions", "joint_velocities", "head_joint_positions", "X_WH", "wrench",
     "color_image", "depth_image", "label_image", "image_time",
     "true_X_WC", "true_p_HP", "true_X_HT", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
-    "true_p_KCo", "true_touch", "true_contact",
+    "true_p_KCo", "true_tool_inertia", "true_outboard_inertia", "true_touch", "true_contact",
+    "sensor_kinematics",
 )
 
 
@@ -432,6 +434,13 @@ def _add_wrench_sensor(builder, world: _World, scenario: Scenario) -> WristWrenc
     builder.Connect(plant.get_reaction_forces_output_port(),
                     wrench.GetInputPort("reaction_forces"))
     builder.ExportOutput(wrench.get_output_port(), "wrench")
+    # The sensor frame's true kinematics at the wrench's instants (the dynamic payload identification).
+    kinematics = builder.AddSystem(SensorKinematicsFromPlant(
+        plant, plant.GetJointByName(SENSOR_JOINT).frame_on_child(), 1.0 / w.rate))
+    kinematics.set_name("sensor_kinematics")
+    for name in ("body_poses", "body_spatial_velocities", "body_spatial_accelerations"):
+        builder.Connect(getattr(plant, f"get_{name}_output_port")(), kinematics.GetInputPort(name))
+    builder.ExportOutput(kinematics.get_output_port(), "sensor_kinematics")
     return wrench
 
 
@@ -460,7 +469,9 @@ def _add_ground_truth(builder, world: _World, camera_body, X_BC) -> GroundTruth:
                else plant.GetFrameByName("grasp", world.arm))
 
     def point_mass(body):
-        return PointMass(int(body.index()), body.default_mass(), tuple(body.default_com()))
+        I_BBcm = body.default_spatial_inertia().Shift(body.default_com()).CalcRotationalInertia()
+        return PointMass(int(body.index()), body.default_mass(), tuple(body.default_com()),
+                         tuple(I_BBcm.get_moments()) + tuple(I_BBcm.get_products()))
 
     truth = builder.AddSystem(GroundTruth(
         hand_body=world.hand.index(), X_HK=world.X_HK, camera_body=camera_body.index(),
@@ -471,7 +482,7 @@ def _add_ground_truth(builder, world: _World, camera_body, X_BC) -> GroundTruth:
     truth.set_name("ground_truth")
     builder.Connect(plant.get_body_poses_output_port(), truth.get_input_port())
     for port in ("X_WH", "true_X_WC", "true_p_HP", "true_X_HT", "true_tool_mass", "true_p_KCm",
-                 "true_outboard_mass", "true_p_KCo"):
+                 "true_outboard_mass", "true_p_KCo", "true_tool_inertia", "true_outboard_inertia"):
         builder.ExportOutput(truth.GetOutputPort(port), port)
     return truth
 

@@ -14,10 +14,16 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
 
 from sustain_drake.identification.candidates.params import CandidateParams
+from sustain_drake.identification.differentiation import savitzky_golay_weights
 from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.loops.hand_eye import CameraMotionConfig, HandEyeConfig
 from sustain_drake.loops.identify_observe import CoordinationConfig
-from sustain_drake.loops.payload import KinestheticConfig, QuasiStaticConfig
+from sustain_drake.loops.payload import (
+    PAYLOAD_MODES,
+    DynamicPayloadConfig,
+    KinestheticConfig,
+    QuasiStaticConfig,
+)
 from sustain_drake.perception.camera_motion import CameraMotionParams
 from sustain_drake.perception.point_refinement import RefinementParams
 from sustain_drake.station.models import ARMS
@@ -230,6 +236,8 @@ RANGES: dict[type, dict[str, Range]] = {
     },
     KinestheticConfig: {"period": _from(1e-4, 1, "s"), "min_touch_force": _from(0, 1000, "N"),
                         "eval_min_force": _from(0, 1000, "N")},
+    DynamicPayloadConfig: {"torque_length": _above(0, 10, "m"), "encoder_window": _from(3, 1001),
+                           "encoder_order": _from(2, 20), "wrench_delay": _from(0, 1, "s")},
     QuasiStaticConfig: {
         "max_joint_speed": _above(0, 10, "rad/s"), "max_joint_acceleration": _above(0, 100, "rad/s^2"),
         "window": _from(0, 60, "s"), "touch_holdoff": WAIT, "max_touch_duration": _above(0, DAY, "s"),
@@ -349,6 +357,8 @@ def _validate(s: Scenario) -> None:
            f"arm.model must be one of {', '.join(ARMS)}, got {shown(s.arm.model)}")
     _check(s.tool.model in TOOL_MODELS, f"tool.model must be one of {', '.join(TOOL_MODELS)}, "
            f"got {shown(s.tool.model)}")
+    _check(s.kinesthetic.mode in PAYLOAD_MODES, f"kinesthetic.mode must be one of "
+           f"{', '.join(PAYLOAD_MODES)}, got {shown(s.kinesthetic.mode)}")
     for key, accepted in PLANT_STRINGS.items():
         value = getattr(s.plant_config, key)
         _check(value in accepted, f"plant_config.{key} must be one of "
@@ -383,6 +393,10 @@ def _validate(s: Scenario) -> None:
     _check_timeline(s)
     _check(not s.kinesthetic.enabled or s.tool.model == "box", "kinesthetic: needs tool.model: box "
            "(the tool with a collision shape to locate touches on)")
+    dynamic = s.kinesthetic.enabled and s.kinesthetic.mode == "dynamic"
+    _check(not (dynamic and s.wrench_sensor.compensate_gripper), "kinesthetic.mode: dynamic needs "
+           "wrench_sensor.compensate_gripper: false (a static compensation leaves the gripper's inertial "
+           "wrench in the reading; the dynamic mode identifies everything outboard)")
     _check_math_layer(s)
 
 
@@ -488,7 +502,9 @@ def _check_math_layer(s: Scenario) -> None:
               # the thresholds' combinations do not depend on the focal length
               ("hand_eye.camera_motion", lambda: he.camera_motion.params(1.0)),
               ("kinesthetic.coordination", lambda: k.coordination.criteria(has_rotation=False)),
-              ("kinesthetic.coordination", k.coordination.rule))
+              ("kinesthetic.coordination", k.coordination.rule),
+              ("kinesthetic.dynamic", lambda: savitzky_golay_weights(
+                  k.dynamic.encoder_window, k.dynamic.encoder_order, k.period, -k.dynamic.wrench_delay)))
     for name, make in checks:
         try:
             make()

@@ -152,7 +152,7 @@ class AdoptedEstimates(LeafSystem):
 
     def _calc_payload_sd(self, context, output) -> None:
         solution = self._payload_solution(context)
-        sd = _sd(getattr(solution, "covariance", None)) if self._payload_valid(context) else None
+        sd = _sd(solution.mass_com_covariance) if self._payload_valid(context) else None
         output.SetFromVector(np.full(4, math.inf) if sd is None else sd)
 
 

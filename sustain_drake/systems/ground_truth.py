@@ -9,14 +9,18 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from sustain_drake.identification.payload_dynamic import N_INERTIAL, inertia_matrix, inertial_parameters
+
 
 @dataclass(frozen=True)
 class PointMass:
-    """A body's mass (kg) and centre of mass ``p_BCm`` (m, in the body frame B)."""
+    """A body's mass (kg), centre of mass ``p_BCm`` (m, in the body frame B) and rotational inertia
+    about it ``I_BBcm`` (kg m^2, in B: ``[I_xx, I_yy, I_zz, I_xy, I_xz, I_yz]``; zeros: a point mass)."""
 
     body_index: int
     mass: float
     p_BCm: tuple[float, float, float]
+    I_BBcm: tuple[float, float, float, float, float, float] = (0.0,) * 6
 
 
 class GroundTruth(LeafSystem):
@@ -36,6 +40,8 @@ class GroundTruth(LeafSystem):
         - true_p_KCm
         - true_outboard_mass
         - true_p_KCo
+        - true_tool_inertia
+        - true_outboard_inertia
 
     ``body_poses`` is ``MultibodyPlant.get_body_poses_output_port()``. Outputs:
 
@@ -51,6 +57,10 @@ class GroundTruth(LeafSystem):
     - ``true_outboard_mass`` (1, kg) and ``true_p_KCo`` (3, m): everything outboard of the
       force/torque sensor (gripper, finger, grip joints and tool), which is what the wrench
       at rest measures: ``f_K = -m_o R_KW g_W``, ``tau_K = p_KCo x f_K``.
+    - ``true_tool_inertia`` and ``true_outboard_inertia`` (10 each): the inertial parameters ``phi``
+      of the held tool alone and of everything outboard (``identification.payload_dynamic``: ``[m;
+      m p_KCm; I_xx, I_yy, I_zz, I_xy, I_xz, I_yz]`` about K's origin, in K; kg, kg m, kg m^2), what
+      the dynamic payload identification identifies (the outboard's, from the raw wrench).
 
     Ground-truth ports are for evaluation only; no estimator may read them.
     """
@@ -88,6 +98,11 @@ class GroundTruth(LeafSystem):
             "true_outboard_mass", BasicVector(1),
             lambda c, o: o.SetFromVector([sum(b.mass for b in self._outboard)]), poses_only)
         self.DeclareVectorOutputPort("true_p_KCo", BasicVector(3), self._calc_p_KCo, poses_only)
+        for name, bodies in (("true_tool_inertia", [tool] if tool else []),
+                             ("true_outboard_inertia", outboard)):
+            self.DeclareVectorOutputPort(
+                name, BasicVector(N_INERTIAL),
+                lambda c, o, bodies=bodies: o.SetFromVector(self._inertia_in_K(c, bodies)), poses_only)
 
     def _X_W(self, context, body: int) -> RigidTransform:
         return self._poses.Eval(context)[body]
@@ -110,6 +125,18 @@ class GroundTruth(LeafSystem):
         X_KW = self._X_KW(poses)
         weighted = sum(b.mass * (X_KW @ poses[b.body_index] @ np.asarray(b.p_BCm)) for b in masses)
         return weighted / total
+
+    def _inertia_in_K(self, context, bodies: list[PointMass]) -> np.ndarray:
+        """The sum of ``bodies``' inertial parameters about K's origin, in K."""
+        poses = self._poses.Eval(context)
+        X_KW = self._X_KW(poses)
+        total = np.zeros(N_INERTIAL)
+        for b in bodies:
+            X_KB = X_KW @ poses[b.body_index]
+            R_KB = X_KB.rotation().matrix()
+            I_Cm_K = R_KB @ inertia_matrix(b.I_BBcm) @ R_KB.T
+            total += inertial_parameters(b.mass, X_KB @ np.asarray(b.p_BCm), I_Cm_K)
+        return total
 
     def _calc_p_KCm(self, context, output) -> None:
         output.SetFromVector(self._com_in_K(context, [self._tool] if self._tool else []))

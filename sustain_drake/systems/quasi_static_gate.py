@@ -1,4 +1,5 @@
-"""Which wrench samples the payload identifier may use: quasi-static and not touched (§4.4)."""
+"""Which wrench samples the payload identifier may use: quasi-static (the static formulation) and
+not touched (§4.4)."""
 
 from __future__ import annotations
 
@@ -39,13 +40,18 @@ class QuasiStaticGate(LeafSystem):
        longer than ``max_touch_duration`` s is no longer treated as one: its samples pass, so
        that a real change of the body (an object stuck to the tool) is observed and re-identified.
 
+    With ``require_still`` False, rule 1 is off and only rule 2 applies: the dynamic payload
+    formulation (``identification.payload_dynamic``) models the motion, so moving samples count,
+    from ``window`` s after the start on.
+
     ``sample_valid`` (1) is 1 or 0, from the state (one ``period`` behind the inputs).
     """
 
     def __init__(self, num_joints: int, period: float = 0.01, max_speed: float = 0.02,
                  max_acceleration: float = 0.05, window: float = 0.2, touch_holdoff: float = 0.5,
-                 max_touch_duration: float = 20.0):  # fmt: skip
+                 max_touch_duration: float = 20.0, require_still: bool = True):  # fmt: skip
         super().__init__()
+        self._require_still = bool(require_still)
         values = (period, max_speed, max_acceleration, max_touch_duration)
         if not (all(v > 0 and math.isfinite(v) for v in values) and window >= 0 and touch_holdoff >= 0):
             raise ValueError("QuasiStaticGate: period, thresholds and max_touch_duration must be > 0")
@@ -74,12 +80,16 @@ class QuasiStaticGate(LeafSystem):
         v = np.asarray(self._velocities.Eval(context), dtype=float)
         a = (v - x[_HEADER:]) / self._period
         first = t < 0.5 * self._period  # no previous reading yet
-        still = (np.all(np.abs(v) < self._max_speed) and np.all(np.isfinite(v))
-                 and (first or np.all(np.abs(a) < self._max_acceleration)))  # fmt: skip
+        still = not self._require_still or (
+            np.all(np.abs(v) < self._max_speed) and np.all(np.isfinite(v))
+            and (first or np.all(np.abs(a) < self._max_acceleration)))  # fmt: skip
         if not still:
             x[_STILL_SINCE] = math.inf
         elif not math.isfinite(x[_STILL_SINCE]) or first:
-            x[_STILL_SINCE] = t if not first else t - self._window
+            # A still start counts as still for the window already, except without rule 1: then the
+            # first window is left out (the simulated reading before the plant's first step, the
+            # grip settling under the payload's weight).
+            x[_STILL_SINCE] = t if not first or not self._require_still else t - self._window
         touched = self._touch.HasValue(context) and self._touch.Eval(context)[0] > 0.5
         if touched:
             x[_TOUCH_SINCE] = x[_TOUCH_SINCE] if x[_TOUCH_SINCE] >= 0 else t

@@ -1,8 +1,8 @@
 """The sustainable identifier (paper §3.1) as a Drake system, for any formulation.
 
-A formulation (``EyeToHandFormulation``, ``PayloadFormulation``) says which sample input ports the
-system has and how a sample becomes ``A_t``; the statistic and the latest solution live in the
-context, so contexts can be cloned and simulations run in parallel.
+A formulation (``EyeToHandFormulation``, ``PayloadFormulation``, ``DynamicPayloadFormulation``) says
+which sample input ports the system has and how a sample becomes ``A_t``; the statistic and the
+latest solution live in the context, so contexts can be cloned and simulations run in parallel.
 """
 
 from __future__ import annotations
@@ -15,7 +15,13 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from sustain_drake.identification import eye_to_hand, observability, payload
+from sustain_drake.identification import (
+    dynamic_observability,
+    eye_to_hand,
+    observability,
+    payload,
+    payload_dynamic,
+)
 from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, SustainableIdentifier
 
 
@@ -136,14 +142,82 @@ class PayloadFormulation:
         return dataclasses.replace(solution, covariance=covariance)
 
     def declare_outputs(self, system: LeafSystem, solution_of) -> None:
-        system.DeclareVectorOutputPort(
-            "mass", 1, lambda context, out: out.SetAtIndex(0, solution_of(context).mass),
-            prerequisites_of_calc={system.all_state_ticket()},
-        )  # fmt: skip
-        system.DeclareVectorOutputPort(
-            "p_KCm", 3, lambda context, out: out.SetFromVector(solution_of(context).p_KCm),
-            prerequisites_of_calc={system.all_state_ticket()},
-        )  # fmt: skip
+        _declare_mass_and_com(system, solution_of)
+
+
+class DynamicPayloadFormulation:
+    """Dynamic payload (issue 26, N = 17: ``identification.payload_dynamic``). Sample ports:
+    ``wrench`` (6: ``[tau_K; f_K]``, N m and N, the sign convention of ``identification.payload``)
+    and ``kinematics_K`` (9: ``[w_WK_K; alpha_WK_K; a_WKo_K - g_K]``, rad/s, rad/s^2, m/s^2, at the
+    wrench's instant; ``systems.sensor_kinematics``). Extra outputs: ``mass`` (1, kg), ``p_KCm`` (3,
+    m), ``I_BBcm`` (6, kg m^2: the rotational inertia about the centre of mass in K, ``[I_xx, I_yy,
+    I_zz, I_xy, I_xz, I_yz]``) and ``wrench_bias`` (6, N m and N).
+
+    Args:
+        criteria: convergence criteria (``payload_dynamic.default_criteria()`` if None).
+        forgetting_factor: see ``SustainableIdentifier``.
+        torque_length: m, see ``DynamicPayloadIdentifier``.
+    """
+
+    num_unknowns = payload_dynamic.N_UNKNOWNS
+
+    def __init__(self, criteria: ConvergenceCriteria | None = None, forgetting_factor: float = 1.0,
+                 torque_length: float = payload_dynamic.DEFAULT_TORQUE_LENGTH):  # fmt: skip
+        self.criteria = criteria or payload_dynamic.default_criteria()
+        self.forgetting_factor = forgetting_factor
+        self.torque_length = torque_length
+
+    def make_identifier(self) -> payload_dynamic.DynamicPayloadIdentifier:
+        return payload_dynamic.DynamicPayloadIdentifier(self.forgetting_factor, self.criteria,
+                                                        self.torque_length)  # fmt: skip
+
+    def declare_sample_inputs(self, system: LeafSystem) -> tuple:
+        return (
+            system.DeclareVectorInputPort("wrench", 6),
+            system.DeclareVectorInputPort("kinematics_K", payload_dynamic.KINEMATICS),
+        )
+
+    def read_sample(self, ports, context):
+        wrench, kinematics = ports[0].Eval(context), ports[1].Eval(context)
+        if not math.isfinite(wrench.sum() + kinematics.sum()):
+            return None
+        return (np.array(wrench), np.array(kinematics))
+
+    def add(self, identifier, sample) -> None:
+        identifier.add(*sample)
+
+    def build_A(self, sample) -> np.ndarray:
+        return payload_dynamic.build_A(sample[0], sample[1], self.torque_length)
+
+    def solve(self, identifier):
+        """The identifier's solution, with its covariance attached when converged
+        (``dynamic_observability.dynamic_payload_covariance``)."""
+        solution = identifier.solve()
+        if not solution.verdict.converged:
+            return solution
+        core = identifier.core
+        covariance = dynamic_observability.dynamic_payload_covariance(core.S_view, core.weight, solution.x)
+        return dataclasses.replace(solution, covariance=covariance)
+
+    def declare_outputs(self, system: LeafSystem, solution_of) -> None:
+        _declare_mass_and_com(system, solution_of)
+        for name, calc in (("I_BBcm", lambda s: s.I_BBcm), ("wrench_bias", lambda s: s.bias)):
+            system.DeclareVectorOutputPort(
+                name, 6, lambda context, out, calc=calc: out.SetFromVector(calc(solution_of(context))),
+                prerequisites_of_calc={system.all_state_ticket()},
+            )  # fmt: skip
+
+
+def _declare_mass_and_com(system: LeafSystem, solution_of) -> None:
+    """The payload formulations' ``mass`` (1, kg) and ``p_KCm`` (3, m) outputs."""
+    system.DeclareVectorOutputPort(
+        "mass", 1, lambda context, out: out.SetAtIndex(0, solution_of(context).mass),
+        prerequisites_of_calc={system.all_state_ticket()},
+    )  # fmt: skip
+    system.DeclareVectorOutputPort(
+        "p_KCm", 3, lambda context, out: out.SetFromVector(solution_of(context).p_KCm),
+        prerequisites_of_calc={system.all_state_ticket()},
+    )  # fmt: skip
 
 
 # Layout of the bookkeeping discrete state.
@@ -157,7 +231,8 @@ class SustainableIdentifierSystem(LeafSystem):
 
         name: SustainableIdentifierSystem
         input_ports:
-        - <sample ports of the formulation> (eye-to-hand: p_CP, X_WH; payload: wrench, X_WK)
+        - <sample ports of the formulation> (eye-to-hand: p_CP, X_WH; payload: wrench, X_WK;
+          dynamic payload: wrench, kinematics_K)
         - sample_valid (optional)
         - reset (optional)
         - reference_x (optional)
@@ -169,7 +244,8 @@ class SustainableIdentifierSystem(LeafSystem):
         - expected_mse
         - observation
         - solution
-        - <outputs of the formulation> (eye-to-hand: X_WC, p_HP; payload: mass, p_KCm)
+        - <outputs of the formulation> (eye-to-hand: X_WC, p_HP; payload: mass, p_KCm; dynamic
+          payload: mass, p_KCm, I_BBcm, wrench_bias)
 
     Every ``period`` seconds (a periodic unrestricted update) it reads one sample, adds it unless
     ``sample_valid`` (1: > 0.5 is valid; unconnected = always valid) says not or it is not

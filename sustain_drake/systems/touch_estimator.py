@@ -48,8 +48,10 @@ class TouchEstimator(LeafSystem):
 
     ``wrench`` (6) is the sensor reading ``[tau_K; f_K]`` (the convention of
     ``identification.payload``), ``X_WK`` the sensor pose, ``payload`` the adopted payload
-    solution (a ``PayloadSolution`` from the state machine's ``adopted_solution``; None before
-    one) and ``allowable_error`` (1) the state machine's ``sigma``.
+    solution (a ``PayloadSolution`` or a ``DynamicPayloadSolution`` from the state machine's
+    ``adopted_solution``; None before one) and ``allowable_error`` (1) the state machine's
+    ``sigma``. The prediction is quasi-static (the payload's weight); a dynamic payload's identified
+    sensor bias is subtracted from the reading first.
 
     A touch is declared when a payload has been adopted and the sample's error under it,
     ``s_t = ||A_t x||^2`` of the payload formulation (``= |f_c|^2/m^2 + |tau_c + f_c x p_KCm|^2``),
@@ -99,12 +101,12 @@ class TouchEstimator(LeafSystem):
         X_WK = self._X_WK.Eval(context)
         R_WK = X_WK.rotation().matrix()
         if payload is not None and payload.mass > 0:
-            wrench = self._wrench.Eval(context)
+            wrench = self._wrench.Eval(context) - payload.bias  # a dynamic payload's sensor bias
             residual = wrench - touch.predicted_wrench(payload.mass, payload.p_KCm, R_WK, self._g_W)
             out[10:16] = residual
             f_c = residual[3:]
-            # The payload formulation's error s_t = ||A_t x||^2 of this sample under the payload.
-            s = SustainableIdentifier.sample_error(build_A(wrench, R_WK, self._g_W), payload.x)
+            # The static payload formulation's error s_t = ||A_t x||^2 of this sample under the payload.
+            s = SustainableIdentifier.sample_error(build_A(wrench, R_WK, self._g_W), payload.static_x)
             sigma = float(self._sigma.Eval(context)[0])
             if s > sigma and math.sqrt(f_c @ f_c) >= self._min_force:
                 point = touch.locate_touch(residual, self._shape, self._X_KG)
