@@ -45,7 +45,8 @@ from baseline_scene import SETTLE, BoardScene, Stop, babbling_stops  # noqa: E40
 from results_page import RESULTS_PAGE, publish  # noqa: E402
 
 from sustain_drake.files import write_atomically  # noqa: E402
-from sustain_drake.identification import calibrate_eye_to_hand  # noqa: E402
+from sustain_drake.identification import calibrate_eye_to_hand, calibrate_eye_to_hand_points  # noqa: E402
+from sustain_drake.identification.batch import MIN_POINT_SAMPLES  # noqa: E402
 from sustain_drake.identification.opencv_hand_eye import (  # noqa: E402
     HAND_EYE_METHODS,
     MIN_POSES,
@@ -64,6 +65,7 @@ SWEEP = ROOT / "diagrams" / "sweeps" / "hand_eye_seeds.yaml"
 BUDGETS = (10, 20, 50)
 SOURCES = {"pnp": "solvePnP (colour)", "depth": "Kabsch (depth)"}
 OURS_ONE_POINT = "ours, `calibrate_eye_to_hand`, one corner"
+OURS_ALL_POINTS = "ours, `calibrate_eye_to_hand_points`, every corner jointly"
 
 
 @dataclass(frozen=True)
@@ -152,7 +154,25 @@ def solve_all(images: CellImages, n: int) -> dict[tuple[str, str], Outcome]:
         result, seconds = _timed(calibrate_eye_to_hand, np.array(p_C), X_WH[rows])
         out[OURS_ONE_POINT, "one"] = Outcome(*pose_error(result.X_WC, images.X_WC), len(rows), seconds,
                                              result.converged)
+    out[OURS_ALL_POINTS, "all"] = _every_corner_jointly(views, X_WH, images.X_WC)
     return out
+
+
+def _every_corner_jointly(views: list, X_WH: np.ndarray, X_WC: np.ndarray) -> Outcome:
+    """Ours on every corner with a depth point, one camera and one ``p_HP`` per corner (the corners
+    seen in fewer than ``MIN_POINT_SAMPLES`` images left out, as the command line leaves them out)."""
+    tracks: dict[int, tuple[list, list]] = {}
+    for i, view in enumerate(views):
+        for corner, p in zip(view.ids.tolist(), view.p_CQ, strict=True):
+            if np.isfinite(p).all():
+                tracks.setdefault(corner, ([], []))[0].append(i)
+                tracks[corner][1].append(p)
+    points = {c: (np.array(s), np.array(p)) for c, (s, p) in tracks.items() if len(s) >= MIN_POINT_SAMPLES}
+    images = len({i for s, _ in points.values() for i in s})
+    if images < MIN_POSES or not points:
+        return Outcome(None, None, images, 0.0, False)
+    result, seconds = _timed(calibrate_eye_to_hand_points, points, X_WH)
+    return Outcome(*pose_error(result.X_WC, X_WC), images, seconds, result.converged)
 
 
 def write_csvs(images: CellImages, n: int, folder: Path) -> None:
@@ -204,9 +224,10 @@ def table(cells: list[CellImages], budgets, results) -> list[str]:
             outcomes = [results[c.label][n][key] for c in cells]
             # OpenCV's solvers return a camera whatever the data; ours only with a converged verdict.
             ran = [o for o in outcomes if o.position is not None and o.converged]
-            failed = 0 if key[1] == "one" else len(outcomes) - len(ran)
+            failed = 0 if key[1] in ("one", "all") else len(outcomes) - len(ran)
             solved = len(ran)
-            source = f"corner {cells[0].corner}, depth" if key[1] == "one" else SOURCES[key[1]]
+            source = {"one": f"corner {cells[0].corner}, depth", "all": "every corner, depth"}.get(
+                key[1]) or SOURCES[key[1]]
             used = statistics.median(o.used for o in outcomes)
             lines.append(
                 f"| {n} ({used:g} seen) | {key[0]} | {source} | {solved}/{len(cells)} "
@@ -237,7 +258,8 @@ def summary(cells: list[CellImages], budget: int) -> list[str]:
     return [f"- {len(cells)} runs; a board pose (>= 6 corners) in {sum(seen)} of {budget * len(cells)} "
             f"images ({100 * sum(seen) / (budget * len(cells)):.0f} %); \"seen\": the median number of "
             "images a method used (with a board pose; for ours, with the corner's depth point)",
-            "- ours, one corner: errors over the runs whose verdict converged (\"solved\"; the others give "
+            "- ours (one corner; every corner jointly): errors over the runs whose verdict converged "
+            "(\"solved\"; the others give "
             "no camera: too few samples or not identified), OpenCV's over every run",
             f"- collect: the babbling's moves at its pace and a {SETTLE:g} s rest before each image; "
             f"detection, PnP and depth points {statistics.median(image_ms):.0f} ms per image (wall, "

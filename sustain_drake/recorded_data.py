@@ -160,19 +160,23 @@ class PointTracks(NamedTuple):
     """A points file (``read_point_tracks_csv``): ``points`` maps each point's label to its samples
     (0-based indices into the poses file's rows, int array) and its positions in the camera frame
     ((m, 3), metres), in the order of the labels' first rows; ``labelled``: the file has the
-    ``sample,point,x,y,z`` header (else ``x,y,z``: one point labelled ``"P"``, row i is sample i)."""
+    ``sample,point,x,y,z`` header (else ``x,y,z``: one point labelled ``"P"``, row i is sample i);
+    ``left_out``: the points of the file in fewer than ``MIN_POINT_SAMPLES`` samples, label ->
+    (their first line, their sample count), not in ``points``."""
 
     points: dict
     labelled: bool
+    left_out: dict = {}
 
 
 def read_point_tracks_csv(path: str | Path, num_samples: int | None = None) -> PointTracks:
     """Reads a points file of either format. With the ``sample,point,x,y,z`` header each row is one
     point seen at one sample: ``sample`` the 0-based row index into the poses file (below
     ``num_samples`` when given), ``point`` a label compared as text (non-empty, printable, at most
-    ``MAX_LABEL_CHARACTERS``); a (sample, point) pair appears once, a point in at least
-    ``MIN_POINT_SAMPLES`` samples (a label seen once or twice is a typo; its own fit needs 4), at
-    most ``MAX_POINTS`` points. Anything else raises RecordedDataError naming the file and line."""
+    ``MAX_LABEL_CHARACTERS``); a (sample, point) pair appears once; at most ``MAX_POINTS`` points.
+    A point in fewer than ``MIN_POINT_SAMPLES`` samples (a board's corner seen in two images; or a
+    typo in a label) is left out (``PointTracks.left_out``: its own fit needs 4); when every point is,
+    and anything else, raises RecordedDataError naming the file and line."""
     path = Path(path)
     header, rows = _read_rows(path, (POINT_COLUMNS, POINT_TRACK_COLUMNS))
     if header == POINT_COLUMNS:
@@ -194,13 +198,23 @@ def read_point_tracks_csv(path: str | Path, num_samples: int | None = None) -> P
         samples, positions = tracks.setdefault(label, ([], []))
         samples.append(sample)
         positions.append(_numbers(path, line_no, header, cells, start=2))
-    for label, (samples, _) in tracks.items():
-        if len(samples) < MIN_POINT_SAMPLES:
-            raise RecordedDataError(f"{path}:{first[label]}: point '{label}' is in {len(samples)} sample"
-                                    f"{'s' if len(samples) > 1 else ''} only, at least {MIN_POINT_SAMPLES} "
-                                    "needed: a typo in its label?")  # fmt: skip
+    left_out = {label: (first[label], len(samples)) for label, (samples, _) in tracks.items()
+                if len(samples) < MIN_POINT_SAMPLES}
+    if tracks and len(left_out) == len(tracks):
+        raise RecordedDataError(f"{path}: no point is in {MIN_POINT_SAMPLES} samples or more (each point's "
+                                f"own fit needs {MIN_POINT_SAMPLES}): {left_out_text(left_out)}")
     return PointTracks({label: (np.array(samples, dtype=np.int64), np.array(positions, dtype=float))
-                        for label, (samples, positions) in tracks.items()}, labelled=True)  # fmt: skip
+                        for label, (samples, positions) in tracks.items() if label not in left_out},
+                       labelled=True, left_out=left_out)  # fmt: skip
+
+
+def left_out_text(left_out: dict, shown: int = 5) -> str:
+    """One line naming the points left out (``PointTracks.left_out``): label, samples, first line;
+    the first ``shown`` of them, then how many more."""
+    items = [f"point '{label}' in {count} sample{'s' if count != 1 else ''} only (line {line})"
+             for label, (line, count) in left_out.items()]
+    more = f"; and {len(items) - shown} more" if len(items) > shown else ""
+    return "; ".join(items[:shown]) + more
 
 
 def _sample_index(path: Path, line_no: int, cell: str, num_samples: int | None) -> int:

@@ -165,7 +165,6 @@ def _few_poses(points):
 
 
 BAD_FILES = {
-    "an unknown point in one sample only": _typo,
     "a sample out of range": _out_of_range,
     "a (sample, point) twice": _duplicate,
     "a negative sample": lambda p: _not_an_index(p, "-1"),
@@ -199,8 +198,21 @@ def test_the_reader_alone_refuses_them_too(files):
     read_point_tracks_csv(bad)  # without the poses' row count the index is not checked
     with pytest.raises(RecordedDataError, match="out of range"):
         read_point_tracks_csv(bad, num_samples=30)
-    with pytest.raises(RecordedDataError, match="is in 1 sample only"):
-        read_point_tracks_csv(_typo(points)[0])
+    tracks = read_point_tracks_csv(_typo(points)[0])
+    assert list(tracks.left_out) == ["tpi"] and tracks.left_out["tpi"][1] == 1 and "tpi" not in tracks.points
+    few = _write(points.parent / "few.csv", f"{HEADER}\n0,a,0.1,0.0,0.9\n1,a,0.1,0.01,0.9\n0,b,0.1,0.0,0.8\n")
+    with pytest.raises(RecordedDataError, match="no point is in 4 samples or more"):
+        read_point_tracks_csv(few)
+
+
+def test_a_point_in_fewer_than_four_samples_is_left_out_and_named(files):
+    # A board corner seen in a few images, or a typo in a label: named on stderr, the others fitted.
+    points, poses, _, _ = files
+    bad, _ = _typo(points)
+    r = calibrate(bad, poses)
+    assert r.returncode == 0, r.stderr
+    assert "left out" in r.stderr and "point 'tpi' in 1 sample only" in r.stderr
+    assert "of 3 points fixed on the hand" in r.stdout
 
 
 def test_end_to_end(files):

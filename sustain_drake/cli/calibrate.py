@@ -27,11 +27,12 @@ from sustain_drake.identification import (
     calibrate_eye_to_hand_points,
 )
 from sustain_drake.identification import eye_to_hand as eye_to_hand_formulation
-from sustain_drake.identification.batch import OUTLIER_FACTOR, EyeToHandPointsResult
+from sustain_drake.identification.batch import MIN_POINT_SAMPLES, OUTLIER_FACTOR, EyeToHandPointsResult
 from sustain_drake.recorded_data import (
     PointTracks,
     RecordedDataError,
     eye_to_hand_yaml,
+    left_out_text,
     read_point_tracks_csv,
     read_poses_csv,
     rpy_degrees,
@@ -143,6 +144,9 @@ def _calibrate(tracks: PointTracks, X_WH: np.ndarray, points: Path, poses: Path,
                criteria: ConvergenceCriteria):  # fmt: skip
     """The calibration of the points read: one point of an ``x,y,z`` file (its rows are the poses'),
     or every point of a ``sample,point,x,y,z`` file jointly."""
+    if tracks.left_out:
+        print(f"left out (fewer than {MIN_POINT_SAMPLES} samples; a typo in a label?): "
+              f"{left_out_text(tracks.left_out)}", file=sys.stderr)
     if tracks.labelled:
         seen = np.unique(np.concatenate([s for s, _ in tracks.points.values()])) if tracks.points else ()
         if len(seen) < criteria.min_samples:
