@@ -1,8 +1,7 @@
 """Admission, feeding and loss of the candidates on a new frame (paper Fig. 7).
 
 - admission: body features with a valid 3-D point become candidates, oldest track first, at most
-  ``max_candidates`` at a time (a bounded cost per frame); while observing, also any feature within
-  ``observe_radius`` of where the adopted model puts the tool point, body or not (below);
+  ``max_candidates`` at a time (a bounded cost per frame);
 - feeding: each frame, each candidate's identifier gets the feature's ``p_CP`` and the hand pose
   ``X_WH`` at the frame's capture time;
 - a motion gate: a point fixed within ``max_hand_radius`` of the hand origin cannot move in the
@@ -112,14 +111,9 @@ def _admit_new(bank, params, criteria, seen: SeenFrame, kept: list, rejected: fr
                   if params.turn_admit_known and bank.leader < 0 else np.zeros_like(on_body))
     order = np.lexsort((ids, ~on_body, ~near_known, ~np.isin(ids, [i for i, _ in bank.known_points])))
     if observing:
-        # The adopted model says where the tool is: a feature within observe_radius of its tool
-        # point is admitted whatever the body detector says. Its cells are fixed in the image, so
-        # after a camera move the tool can lie in cells it has not found again, and without new
-        # points the model is observed by nothing once its points' tracks end (the depth check
-        # alone does not see a slide along the tool). A point not on the hand fails its fit.
-        distance = np.linalg.norm(p_CP - predicted_p_CP(np.asarray(seen.given.reference_x), X_frame), axis=1)
-        near_known = near_known | (distance <= min(params.observe_radius, params.max_hand_radius))
-        order = np.stack([np.argsort(distance), order], axis=1).ravel()
+        tool_point = predicted_p_CP(np.asarray(seen.given.reference_x), X_frame)
+        nearest = np.argsort(np.linalg.norm(p_CP - tool_point, axis=1))
+        order = np.stack([nearest, order], axis=1).ravel()
     for k in order:
         if len(kept) >= params.max_candidates:
             break
