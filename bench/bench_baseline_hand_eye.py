@@ -195,10 +195,17 @@ def loop_results(page: Path = RESULTS_PAGE) -> tuple[dict[str, tuple[float, floa
     the table was measured at (the block's own line, else the section's "Measured at")."""
     text = page.read_text(encoding="utf-8")
     block = text.split("<!-- BEGIN bench_hand_eye -->", 1)[1].split("<!-- END bench_hand_eye -->", 1)[0]
-    rows = re.findall(r"^\| (scenario|seed \d+) \| ([\d.]+) s \| ([\d.]+) s: \*\*([\d.]+) / ([\d.]+)\*\*",
+    # The table as bench_hand_eye writes it ("| 0 | seed=~ | 8.4 s | 11.5 s identified: 0.14 / 0.01,"),
+    # or its earlier hand-written form ("| scenario | 8.4 s | 11.5 s: **0.33 / 0.03**").
+    rows = re.findall(r"^\| \d+ \| seed=(~|\d+) \| ([\d.]+) s \| ([\d.]+) s identified: ([\d.]+) / ([\d.]+),",
                       block, flags=re.M)
+    rows = [("scenario" if r[0] == "~" else f"seed {r[0]}", *r[1:]) for r in rows]
+    rows += re.findall(r"^\| (scenario|seed \d+) \| ([\d.]+) s \| ([\d.]+) s: \*\*([\d.]+) / ([\d.]+)\*\*",
+                       block, flags=re.M)
     runs = {r[0]: tuple(float(x) for x in r[1:]) for r in rows}
-    commits = re.findall(r"commit `([0-9a-f]{7,40})`", block)
+    cells_at = re.search(r"cells run at commit\(s\): (.*)", block)
+    commits = re.findall(r"`([0-9a-f]{7,40})`", cells_at.group(1)) if cells_at else []
+    commits = commits or re.findall(r"commit `([0-9a-f]{7,40})`", block)
     if not commits:
         section = text.split("## Hand-eye", 1)[1].split("<!-- BEGIN bench_hand_eye -->", 1)[0]
         measured = re.search(r"\*\*Measured at:\*\*([^;.]*)", section)
