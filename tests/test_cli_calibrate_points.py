@@ -309,7 +309,9 @@ def test_fuzz_labelled_points_and_poses_files(points, poses):
                                     "--poses", str(folder / "q.csv"), "--out", str(folder / "result.yaml")])
         event(f"exit {code}")
         assert code in (0, 2, 3), err
-        assert len(err.splitlines()) == (0 if code == 0 else 1), err
+        # Warnings (points left out) may precede the result; at most one error line follows them.
+        errors = [line for line in err.splitlines() if not line.startswith("sustain-drake: warning:")]
+        assert len(errors) == (0 if code == 0 else 1), err
         after = snapshot(folder)
         changed = {p.name for p in before.keys() | after.keys() if before.get(p) != after.get(p)}
         assert changed == ({"result.yaml"} if code == 0 else set()), (code, changed)

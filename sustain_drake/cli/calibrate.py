@@ -145,8 +145,8 @@ def _calibrate(tracks: PointTracks, X_WH: np.ndarray, points: Path, poses: Path,
     """The calibration of the points read: one point of an ``x,y,z`` file (its rows are the poses'),
     or every point of a ``sample,point,x,y,z`` file jointly."""
     if tracks.left_out:
-        print(f"left out (fewer than {MIN_POINT_SAMPLES} samples; a typo in a label?): "
-              f"{left_out_text(tracks.left_out)}", file=sys.stderr)
+        print(f"sustain-drake: warning: left out (fewer than {MIN_POINT_SAMPLES} samples; "
+              f"a typo in a label?): {left_out_text(tracks.left_out)}", file=sys.stderr)
     if tracks.labelled:
         seen = np.unique(np.concatenate([s for s, _ in tracks.points.values()])) if tracks.points else ()
         if len(seen) < criteria.min_samples:
