@@ -8,7 +8,7 @@ candidate: frames seen, the median ``p_H`` relative to the rod tip, its wander (
 distance from the median), and the truth-fit RMS of its samples (``best_p_HP_given_camera`` with
 the true camera: what Eq. (30) leaves unexplained even with the right camera; from the samples the
 loop's identifiers got). With ``--refine`` the mapped points are the refined ones
-(``perception.point_refinement`` with the scenario's ``hand_eye.refinement``) rather than the
+(``perception.point_refinement`` with the loop's refinement, ``hand_eye_parts``) rather than the
 tracker's own.
 
 Then, against the TRUE 3-D position of the mark each candidate tracks: the rod's checker corners
@@ -43,6 +43,7 @@ from sustain_drake.identification.candidates import (
     rotation_spread,
 )
 from sustain_drake.identification.eye_to_hand import pack_x
+from sustain_drake.loops.hand_eye import HandEyeParts, hand_eye_parts
 from sustain_drake.perception.optical_flow import to_gray
 from sustain_drake.perception.point_refinement import (
     RefinementParams,
@@ -84,20 +85,22 @@ def rod_marks_T() -> tuple[np.ndarray, np.ndarray]:
 
 
 def run(scenario_path: Path, duration: float, refinement: RefinementParams | None = None,
-        compare: RefinementParams | None = None, seed: int | None = None, criteria=None) -> dict:
+        compare: RefinementParams | None = None, seed: int | None = None, criteria=None,
+        parts: HandEyeParts | None = None) -> dict:
     """The loop's candidates' points over ``duration`` s: ``tracks[id]`` rows of (time, p_H with the
     true camera, rod tip, p_CP, X_WH, and ``criteria(gray, refined pixels)``'s row for the point
     when given: a K x m array of per-point figures) for the ``refinement``'s points (the tracker's
     if None), and
     ``versions[id]`` rows of (X_CH true, {variant: p_CP or None}) for the three ``VARIANTS`` (the
-    refined ones with ``compare``'s other settings)."""
+    refined ones with ``compare``'s other settings). The loop runs with ``parts`` (``HandEyeParts``)
+    if given, else with the scenario's settings."""
     # A path, or a scenario already loaded (and changed) by the caller.
     scenario = load_scenario(scenario_path) if isinstance(scenario_path, (str, Path)) else scenario_path
     if seed is not None:
         scenario = with_seed(scenario, seed)
     builder = DiagramBuilder()
     station = builder.AddSystem(build_station(scenario))
-    handle = hand_eye.add_to_diagram(builder, station, scenario, None)
+    handle = hand_eye.add_to_diagram(builder, station, scenario, None, parts)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     root = simulator.get_context()
@@ -223,7 +226,7 @@ def main() -> None:
     parser.add_argument("--refine", action="store_true",
                         help="map the refined points (hand_eye.refinement) instead of the tracker's")
     args = parser.parse_args()
-    scenario_refinement = load_scenario(args.scenario).hand_eye.refinement
+    scenario_refinement = hand_eye_parts(load_scenario(args.scenario).hand_eye).refinement
     refinement = scenario_refinement if args.refine else None
     out = run(args.scenario, args.duration, refinement, scenario_refinement, args.seed)
     R_WC, p_WC = out["X_WC"][:3, :3], out["X_WC"][:3, 3]

@@ -44,6 +44,7 @@ from bench_hand_eye_candidates import run  # noqa: E402  (bench/bench_hand_eye_c
 from sustain_drake.files import write_atomically  # noqa: E402
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, refine_joint  # noqa: E402
 from sustain_drake.identification.rotation import rotation_angle  # noqa: E402
+from sustain_drake.loops.hand_eye import hand_eye_parts  # noqa: E402
 from sustain_drake.station import load_scenario  # noqa: E402
 
 MIN_SAMPLES = 100  # a track shorter than this is left out (the loop's observe_min_samples)
@@ -179,7 +180,7 @@ def main() -> None:
     if args.resolution:
         scenario.camera.width, scenario.camera.height = args.resolution
         name += f"_{args.resolution[0]}x{args.resolution[1]}"
-    refinement = scenario.hand_eye.refinement
+    refinement = hand_eye_parts(scenario.hand_eye).refinement
     out = run(scenario, args.duration, refinement, refinement, args.seed)
     b = budget(out, args.max_gap, args.noise_along, args.noise_across)
     report(b)

@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_hand_eye_candidates import run  # noqa: E402
 from make_scene_matrix import SWEEPS  # noqa: E402
 
-from sustain_drake.loops.hand_eye import measured_refinement  # noqa: E402
+from sustain_drake.loops.hand_eye import hand_eye_parts  # noqa: E402
 from sustain_drake.loops.pixel_scale import pixel_scale, scaled  # noqa: E402
 from sustain_drake.perception.point_refinement import central_symmetry, view_shift  # noqa: E402
 from sustain_drake.station import camera_info  # noqa: E402
@@ -41,16 +41,17 @@ def cell_samples(scenario, duration: float):
     ``scenario``: the sample's distance from its track's median ``p_H``, and that of the median of
     the track's samples in the same second (the view-dependent part; the depth noise averages out)."""
     scale = pixel_scale(camera_info(scenario))
-    base = dataclasses.replace(measured_refinement(), symmetry_window_px=0)
+    parts = hand_eye_parts(scenario.hand_eye)
+    base = dataclasses.replace(parts.refinement, symmetry_window_px=0)
     refinement = scaled(base, scale, lengths=("max_shift_px",),
                         windows=("corner_window_px", "depth_window_px"))
     sym_half, corner_half = max(1, round(3 * scale)), refinement.corner_window_px
-    scenario = dataclasses.replace(scenario, hand_eye=dataclasses.replace(scenario.hand_eye, refinement=base))
+    parts = dataclasses.replace(parts, refinement=base)
 
     def criteria(gray, p_px):
         return np.c_[central_symmetry(gray, p_px, sym_half), view_shift(gray, p_px, corner_half)]
 
-    out = run(scenario, duration, refinement, refinement, criteria=criteria)
+    out = run(scenario, duration, refinement, refinement, criteria=criteria, parts=parts)
     figures, wander, drift = [], [], []
     for rows in out["tracks"].values():
         p_H, t = np.array([r[1] for r in rows]), np.array([r[0] for r in rows])

@@ -5,6 +5,7 @@ camera: fast) through a tool slip and a head move; and the whole loop from rende
 (tracker, coincidence detector, candidates, state machine) until the first convergence.
 """
 
+import dataclasses
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -19,6 +20,7 @@ from sustain_drake.experiments import hand_eye
 from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import own_fit
 from sustain_drake.identification.rotation import rotation_angle
+from sustain_drake.loops.hand_eye import hand_eye_parts
 from sustain_drake.loops.identify_observe import connect_identify_observe
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.station import build_station, load_scenario
@@ -70,16 +72,16 @@ def add_scripted_loop(builder, disturbances: list) -> SimpleNamespace:
     scenario.camera.rgb = scenario.camera.depth = False
     scenario.distractor.enabled = False
     scenario.disturbances = disturbances
-    scenario.hand_eye.candidates.confirm_with_witness = False  # one scripted point
-    config = scenario.hand_eye.coordination
-    config.allowable_error_factor = 100.0  # the paper's: the scripted noise is Gaussian
-    config.min_gap_ratio = 10.0
+    parts = hand_eye_parts(scenario.hand_eye)
+    candidate_params = dataclasses.replace(parts.candidates, confirm_with_witness=False)  # one scripted point
+    # the paper's allowable error factor: the scripted noise is Gaussian
+    config = dataclasses.replace(parts.coordination, allowable_error_factor=100.0, min_gap_ratio=10.0)
     station = builder.AddSystem(build_station(scenario))
     source = builder.AddSystem(ScriptedToolPoint())
     for name in ("X_WH", "true_X_WC", "true_p_HP"):
         builder.Connect(station.GetOutputPort(name), source.GetInputPort(name))
     candidates = builder.AddSystem(CandidateIdentifiers(
-        EyeToHandFormulation(config.criteria()), scenario.hand_eye.candidates, PERIOD))
+        EyeToHandFormulation(config.criteria()), candidate_params, PERIOD))
     machine = builder.AddSystem(CoordinationStateMachine(16, config.rule(), PERIOD))
     builder.Connect(source.GetOutputPort("tracked_features"), candidates.GetInputPort("tracked_features"))
     builder.Connect(source.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))

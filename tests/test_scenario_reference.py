@@ -37,5 +37,5 @@ def test_every_scenario_key_has_its_comment():
 def test_the_committed_reference_page_is_current():
     page = reference.reference_page()
     assert reference.PAGE.read_text(encoding="utf-8") == page, "run `make docs`"
-    for key in ("hand_eye.candidates", "disturbances[] !ToolSlip", "kinesthetic.quasi_static"):
+    for key in ("hand_eye.depth_noise", "disturbances[] !ToolSlip", "kinesthetic.quasi_static"):
         assert f"## `{key}`" in page

@@ -106,9 +106,9 @@ BAD = [
     # the experiments' settings
     ("hand_eye: {log_rate: 0}\n", "hand_eye.log_rate"),
     ("hand_eye: {log_rate: .inf}\n", "hand_eye.log_rate"),
-    ("hand_eye: {candidates: {max_candidates: 1000000000}}\n", "hand_eye.candidates.max_candidates"),
-    ("hand_eye: {coordination: {forgetting_factor: 2}}\n", "hand_eye.coordination.forgetting_factor"),
-    ("hand_eye: {camera_motion: {move_angle: 0.001, still_angle: 0.005}}\n", "hand_eye.camera_motion"),
+    ("hand_eye: {max_candidates: 1000000000}\n", "hand_eye.max_candidates"),
+    ("hand_eye: {min_samples: 0}\n", "hand_eye.min_samples"),
+    ("hand_eye: {depth_noise: {a: .nan}}\n", "hand_eye.depth_noise.a"),
     ("hand_eye: {identifying_motion_interval: 2.0, identifying_motion_max_hold: 1.0}\n",
      "hand_eye.identifying_motion_max_hold"),
     ("kinesthetic: {quasi_static: {window: .nan}}\n", "kinesthetic.quasi_static.window"),

@@ -236,14 +236,13 @@ def test_hand_pose_from_a_plant_with_other_bodies_reads_the_arm_instance_only():
 
 
 def test_the_camera_motion_detector_is_optional_and_exported():
-    """``hand_eye.camera_motion.enabled`` adds the camera-motion detector (fed by the same joint
+    """``hand_eye.camera_motion`` adds the camera-motion detector (fed by the same joint
     positions as the coincidence detector) and its ``camera_motion`` output; off, neither."""
     info = CameraInfo(160, 120, 1.0)
-    off = HandEyeConfig(identifying_motion_interval=0.0)
-    off.camera_motion.enabled = False
+    off = HandEyeConfig(identifying_motion_interval=0.0, camera_motion=False)
     assert not make_sustainable_coordination(info, 6, hand_eye=off).HasOutputPort("camera_motion")
     config = HandEyeConfig(identifying_motion_interval=0.0)
-    assert config.camera_motion.enabled  # the measured configuration's default
+    assert config.camera_motion  # the measured configuration's default
     diagram = make_sustainable_coordination(info, 6, hand_eye=config)
     context = diagram.CreateDefaultContext()
     diagram.GetInputPort("color_image").FixValue(context, ImageRgba8U(160, 120))

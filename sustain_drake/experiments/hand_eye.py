@@ -34,7 +34,7 @@ from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import best_p_HP_given_camera
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
-from sustain_drake.loops.hand_eye import add_hand_eye_loop
+from sustain_drake.loops.hand_eye import HandEyeParts, add_hand_eye_loop, hand_eye_parts
 from sustain_drake.loops.inspection import add_estimate_overlay, add_inspection
 from sustain_drake.station import ScenarioError, camera_info
 from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of, timeline
@@ -65,19 +65,21 @@ class HandEyeHandle:
     tool_boxes: tuple = ()  # the held tool's geometry in its frame T (``hand_eye_metrics.Box``)
 
 
-def build_loop(builder, station, scenario):
+def build_loop(builder, station, scenario, parts: HandEyeParts | None = None):
     """Adds tracker, detector, candidates, state machine (and, if enabled, the camera-motion
     detector) wired to ``station`` (its image, encoder, ``X_WH`` outputs and
-    ``motion_confirm``/``motion_pause`` inputs). Returns the ``HandEyeLoop``."""
+    ``motion_confirm``/``motion_pause`` inputs), with the scenario's ``hand_eye`` settings, or with
+    ``parts`` as given (a study of the loop's constants). Returns the ``HandEyeLoop``."""
     config, perception = scenario.hand_eye, scenario.body_detection
     if scenario.depth_noise.enabled:  # the loop's sensor model is the station's depth noise
         noise = scenario.depth_noise
         config = dataclasses.replace(config, depth_noise=DepthNoiseModel(noise.a, noise.b, noise.z0))
+    settings = hand_eye_parts(config) if parts is None else parts
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("depth_image")):
         raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
     try:
         loop = add_hand_eye_loop(builder, camera_info(scenario), len(arm_of(scenario).joints),
-                                 scenario.camera.fps, config, perception,
+                                 scenario.camera.fps, settings, perception,
                                  arm_motion(scenario).joint_ranges, scenario.motion.seed)  # fmt: skip
     except ValueError as e:
         raise ScenarioError(f"hand_eye: {e}") from None
@@ -96,8 +98,8 @@ def build_loop(builder, station, scenario):
     return loop
 
 
-def add_to_diagram(builder, station, scenario, meshcat) -> HandEyeHandle:
-    loop = build_loop(builder, station, scenario)
+def add_to_diagram(builder, station, scenario, meshcat, parts: HandEyeParts | None = None) -> HandEyeHandle:
+    loop = build_loop(builder, station, scenario, parts)
     tracker, detector, candidates, machine = loop.tracker, loop.detector, loop.candidates, loop.state_machine
     period = 1.0 / scenario.hand_eye.log_rate
     systems = {"candidates": candidates, "state_machine": machine, "station": station,
@@ -164,7 +166,8 @@ def evaluate(handle, diagram, context) -> dict:
     t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
     _, X_HT_log = _log(handle, diagram, context, "true_X_HT")
     _, p_HP_log = _log(handle, diagram, context, "true_p_HP")
-    criteria = config.coordination.criteria()
+    rule_config = hand_eye_parts(config).coordination
+    criteria = rule_config.criteria()
     points = _followed_points(handle, diagram, context)
 
     adopted = []
@@ -172,7 +175,7 @@ def evaluate(handle, diagram, context) -> dict:
         if k >= len(bank.adoptions):
             break
         a = bank.adoptions[k]
-        identifier = EyeToHandIdentifier(config.coordination.forgetting_factor, criteria)
+        identifier = EyeToHandIdentifier(rule_config.forgetting_factor, criteria)
         identifier.set_state(a.statistic)
         est = a.estimate
         X_WC = m.at(t_pose, X_WC_log, t).reshape(4, 4)
@@ -337,7 +340,7 @@ def plot(handle, diagram, context, metrics, path: Path) -> None:
     axes[0].set_ylabel("eigenvalues")
     axes[0].legend(loc="upper right", ncol=4, fontsize=8)
     axes[1].semilogy(t, np.where(np.isfinite(ssd[:, 0]), ssd[:, 0], np.nan), color="k")
-    axes[1].axhline(handle.scenario.hand_eye.coordination.max_ssd, color="r", ls="--", lw=0.8)
+    axes[1].axhline(hand_eye_parts(handle.scenario.hand_eye).coordination.max_ssd, color="r", ls="--", lw=0.8)
     axes[1].set_ylabel("SSD")
     observing = mode[:, 0] == coordination.OBSERVE
     # Only the logged samples with a new observation (the observed point was seen since the last).

@@ -1,7 +1,8 @@
 """Loops: the paper's identify <-> observe loops wired from the systems, with their settings.
 
 - ``body_detection``: tracker -> motion coincidence detector (paper §3.3), ``BodyDetectionConfig``.
-- ``hand_eye``: the marker-free eye-to-hand loop (§3.4, Fig. 7), ``HandEyeConfig``.
+- ``hand_eye``: the marker-free eye-to-hand loop (§3.4, Fig. 7), ``HandEyeConfig`` (the user's
+  settings) and ``hand_eye_parts`` (every threshold, ``HandEyeParts``).
 - ``payload``: the payload identification and touch loop (§3.5), ``KinestheticConfig``.
 - ``identify_observe``: the rule's thresholds (``CoordinationConfig``) and the loop's wiring.
 - ``coordination``: ``make_sustainable_coordination``, the loops chosen (``Loops``) as one Diagram for a
@@ -16,9 +17,9 @@ arguments of ``make_sustainable_coordination``; each field's comment is its docu
 
 from sustain_drake.loops.body_detection import BodyDetectionConfig
 from sustain_drake.loops.coordination import Loops, camera_intrinsics, make_sustainable_coordination
-from sustain_drake.loops.hand_eye import HandEyeConfig
+from sustain_drake.loops.hand_eye import HandEyeConfig, HandEyeParts, hand_eye_parts
 from sustain_drake.loops.identify_observe import CoordinationConfig
 from sustain_drake.loops.payload import KinestheticConfig
 
-__all__ = ["BodyDetectionConfig", "CoordinationConfig", "HandEyeConfig", "KinestheticConfig", "Loops",
-           "camera_intrinsics", "make_sustainable_coordination"]
+__all__ = ["BodyDetectionConfig", "CoordinationConfig", "HandEyeConfig", "HandEyeParts", "KinestheticConfig",
+           "Loops", "camera_intrinsics", "hand_eye_parts", "make_sustainable_coordination"]

@@ -217,7 +217,7 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
         - hand_eye_events (with hand_eye)
         - hand_eye_allowable_error (with hand_eye)
         - hand_eye_reset_reason (with hand_eye)
-        - camera_motion (with hand_eye.camera_motion.enabled)
+        - camera_motion (with hand_eye.camera_motion)
         - payload_mass (with payload)
         - p_KCm (with payload)
         - payload_valid (with payload)
@@ -254,7 +254,7 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
     position in m; ``p_HP_sd``: 3, m; ``payload_sd``: 4, kg then m; ``inf`` when not known);
     ``followed_point`` (9, ``[feature_id, u, v, p_CP, p_HP]``: the tracked feature observed under
     the adopted model, its pixel in px, its point in the camera frame and in the hand frame in m)
-    with ``followed_point_valid`` (1); ``candidate_states`` (``3 * hand_eye.candidates.max_candidates``:
+    with ``followed_point_valid`` (1); ``candidate_states`` (``3 * hand_eye.max_candidates``:
     per candidate ``[feature_id, num_samples, state]``, state 0 identifying, 1 converged, 2 leader,
     -1 an empty slot); ``hand_eye_mode`` and ``payload_mode`` (1: 0 identify, 1 observe);
     ``*_events`` (the state machines' event lists); ``*_reset_reason`` (1: why the loop last

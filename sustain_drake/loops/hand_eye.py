@@ -5,6 +5,7 @@ motion beyond the paper."""
 
 # No "from __future__ import annotations": yaml_load_typed needs the real field types.
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,8 +25,54 @@ from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceD
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormulation
 
+# m: the depth at which the depth noise sets the allowable error's floor (``noise_rms``): the
+# nearest the held tool comes to the camera in the measured scene, where its noise is the smallest
+NOISE_FLOOR_DEPTH = 0.6
+# m: the floor is the sensor's sigma there rounded up to this (1.2 + 0.08 mm -> 1.3 mm)
+NOISE_FLOOR_STEP = 1e-4
 
-@dataclasses.dataclass
+
+@dataclass
+class HandEyeConfig:
+    """Sustainable marker-free hand-eye coordination: identifiers per candidate body feature and
+    the identify <-> observe state machine (paper §3.4, §4.3). The scenario's ``hand_eye`` section:
+    the robot's and tool's sizes, the sensor's noise model, the paper's rule and which steps beyond
+    the paper run. Every other threshold is a constant of the loop (``hand_eye_parts``), stated with
+    its reason where it is defined. The defaults are the configuration the results were measured
+    with (docs/results.md)."""
+
+    enabled: bool = False  # run the hand-eye experiment on the scenario's world
+    # the depth camera's noise sigma(z) (m), the sensor's model: the allowable error's floor (its
+    # sigma at 0.6 m, noise_floor) and the refiner's view-shift gate (a simulated station passes its own)
+    depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)
+    max_hand_radius: float = 0.6  # m: farthest a tracked point on the hand or its tool lies from the hand
+    tool_radius: float = 0.1  # m: points this near the tool point in H are the tool's (a slip moves them)
+    # count: samples before a point's identifier may converge (8.3 s at 30 Hz: views from several sides)
+    min_samples: int = 250
+    max_expected_rms: float = 0.005  # m, criterion (a): the physical form of lambda_16 < 5e-5
+    allowable_error_factor: float = 100.0  # sigma = factor * max(a^2 lambda_16, noise_rms^2), the paper's
+    max_consecutive_violations: int = 10  # count: samples over sigma in a row that are a change, the paper's
+    pause_after_convergence: float = 3.0  # s the motion pauses after a convergence, the paper's
+    max_candidates: int = 8  # count: identifiers run at a time, one per candidate point (the cost per frame)
+    camera_motion: bool = True  # the camera notices its own motion from the static scene (needs one in view)
+    # s; > 0: while identifying, a far posture is asked of the babbling when no confirming request
+    # came for this long (systems.identifying_motion; needs the joint ranges); 0: off
+    identifying_motion_interval: float = 1.0
+    # s (>= the interval): after a first convergence, a far posture also comes when the arm stayed
+    # within 0.2 rad of one posture this long, however often the detector asks
+    identifying_motion_max_hold: float = 3.0
+    # rad; > 0: while the candidates ask for more motion, postures within this (max-norm) of the
+    # arm's when the ask began (the hand turns while the points' faces stay in view); 0: anywhere
+    identifying_motion_reach: float = 0.1
+    refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
+    # besides centrally symmetric points, keep points that a 45 deg tilt of their face moves by at
+    # most this many depth-noise sigmas (points without a checker; docs/hand_eye.md); 0: symmetric only
+    max_view_shift_sigmas: float = 0.0
+    false_alarm_window: float = 2.0  # s; a detection with no disturbance this long before is a false alarm
+    log_rate: float = 30.0  # samples per second of the logged signals (plots, metrics)
+
+
+@dataclass
 class CameraMotionConfig:
     """The camera notices its own motion from the static scene (beyond the paper,
     ``perception.camera_motion``). Image thresholds are angles (rad), turned into pixels with the
@@ -58,31 +105,46 @@ class CameraMotionConfig:
             view_still_px=self.view_still_angle * focal_px, exclude_static=self.exclude_static)
 
 
-def measured_coordination() -> CoordinationConfig:
-    """The hand-eye identify/observe settings the results were measured with (docs/results.md)."""
-    return CoordinationConfig(
-        max_expected_rms=0.005,  # m, criterion (a): the physical form of lambda_16 < 5e-5
+@dataclass(frozen=True)
+class HandEyeParts:
+    """Every setting of the hand-eye loop: a ``HandEyeConfig`` (the user's) and the math layer's
+    parameter objects made from it (``hand_eye_parts``). ``add_hand_eye_loop`` takes either; a
+    study that varies a constant passes parts with it changed (``dataclasses.replace``)."""
+
+    config: HandEyeConfig
+    coordination: CoordinationConfig  # convergence criteria and the observation rule
+    candidates: CandidateParams  # the candidate identifiers' rules (Fig. 7 and beyond)
+    refinement: RefinementParams  # the FeatureRefiner's thresholds at the measured camera
+    camera_motion: CameraMotionConfig  # the camera-motion detector's (enabled from the config)
+
+
+def noise_floor(depth_noise: DepthNoiseModel) -> float:
+    """``noise_rms`` (m): the per-sample RMS residual of the sensor's noise alone, the floor under
+    the allowable error: ``sigma(NOISE_FLOOR_DEPTH)`` rounded up to ``NOISE_FLOOR_STEP``."""
+    steps = math.ceil(float(depth_noise.sigma(NOISE_FLOOR_DEPTH)) / NOISE_FLOOR_STEP - 1e-9)
+    return steps / round(1.0 / NOISE_FLOOR_STEP)  # 13 / 10000 is the double nearest 0.0013
+
+
+def hand_eye_parts(config: HandEyeConfig) -> HandEyeParts:
+    """The loop's parameter objects from the user's settings. The constants below are the measured
+    configuration (docs/results.md); each rule they turn on is described at its field
+    (``CandidateParams``, ``RefinementParams``, ``CoordinationConfig``) and in docs/hand_eye.md."""
+    coordination = CoordinationConfig(
+        max_expected_rms=config.max_expected_rms,
         min_gap_ratio=30.0,  # criterion (b): lambda_15 / lambda_16
         max_ssd=0.1,  # criterion (c), the paper's
-        # 8.3 s at 30 Hz: the babbling covers more of its range before a camera is adopted, so the
-        # rotation about the workspace is pinned by views from several sides
-        min_samples=250,
-        allowable_error_factor=100.0,  # sigma = 100 max(a^2 lambda_16, noise_rms^2), the paper's
-        # m: the depth noise sigma(z) = 1.2 mm + 1.9 mm/m^2 (z - 0.4 m)^2 at the tool's 0.6 m
-        # (Nguyen et al. 2012; station DepthNoiseConfig), rounded up
-        noise_rms=0.0013,
-        max_consecutive_violations=10,  # the paper's
-        pause_after_convergence=3.0,  # s, the paper's
+        min_samples=config.min_samples,
+        allowable_error_factor=config.allowable_error_factor,
+        noise_rms=noise_floor(config.depth_noise),
+        max_consecutive_violations=config.max_consecutive_violations,
+        pause_after_convergence=config.pause_after_convergence,
     )  # fmt: skip
-
-
-def measured_candidates() -> CandidateParams:
-    """The candidate identifiers' settings the results were measured with; the rules beyond the
-    paper that they turn on are described at ``CandidateParams``' fields and in docs/hand_eye.md."""
-    return CandidateParams(
-        max_candidates=8, motion_min_samples=30, max_unconverged_time=30.0,
+    candidates = CandidateParams(
+        max_candidates=config.max_candidates, max_hand_radius=config.max_hand_radius,
+        observe_radius=config.tool_radius,
+        motion_min_samples=30, max_unconverged_time=30.0,
         joint=True, joint_consistency=2.0, joint_weighted=True, max_observers=4,
-        observe_min_samples=100, observe_radius=0.1,
+        observe_min_samples=100,
         reacquire_radius=0.004,  # m, three times the depth noise
         min_rotation_spread=0.05, keep_allowable_error=True,
         free_space_radius=0.005,  # m around the adopted tool point: the smallest depth seen behind it
@@ -90,48 +152,13 @@ def measured_candidates() -> CandidateParams:
         # after a slip with the scene still, only p_HP is new (3 unknowns): 1.7 s at 30 Hz
         keep_camera_min_samples=50,
     )  # fmt: skip
-
-
-def measured_refinement() -> RefinementParams:
-    """The FeatureRefiner's settings the results were measured with: cornerSubPix with a 9 x 9
-    window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it), only centrally symmetric
-    points, the depth on the face's fitted plane (docs/hand_eye.md, "The points"; the view-shift
-    gate, ``max_view_shift_sigmas``, is measured there and left off)."""
-    return RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3, depth_plane=True)
-
-
-@dataclasses.dataclass
-class HandEyeConfig:
-    """Sustainable marker-free hand-eye coordination: identifiers per candidate body feature and
-    the identify <-> observe state machine (paper §3.4, §4.3). The defaults are the configuration
-    the results were measured with (docs/results.md)."""
-
-    enabled: bool = False  # run the hand-eye experiment on the scenario's world
-    # convergence and observation (measured_coordination)
-    coordination: CoordinationConfig = field(default_factory=measured_coordination)
-    # candidate tracked points (Fig. 7; measured_candidates)
-    candidates: CandidateParams = field(default_factory=measured_candidates)
-    camera_motion: CameraMotionConfig = field(default_factory=CameraMotionConfig)  # the camera's own motion
-    # s; > 0: while identifying, a far posture is asked of the babbling when no confirming request
-    # came for this long (systems.identifying_motion; needs the joint ranges); 0: off. The detector's
-    # confirming trials otherwise hold the arm near one posture, and the camera's rotation is only
-    # seen through the hand's turning.
-    identifying_motion_interval: float = 1.0
-    # s (>= the interval): after a first convergence, a far posture also comes when the arm has
-    # stayed within 0.2 rad of one posture this long, however often the detector asks.
-    identifying_motion_max_hold: float = 3.0
-    # rad; > 0: while the candidates ask for more motion, the postures asked for lie within this
-    # (max-norm) of the arm's posture when the ask began (the hand turns while the points' faces stay
-    # in view); 0: far postures over the whole ranges.
-    identifying_motion_reach: float = 0.1
-    refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
-    # the FeatureRefiner's thresholds (measured_refinement)
-    refinement: RefinementParams = field(default_factory=measured_refinement)
-    # the depth camera's noise sigma(z) (m), the sensor's model, not a setting of the method: the
-    # refiner's view-shift gate is relative to it (a simulated station passes its own)
-    depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)
-    false_alarm_window: float = 2.0  # s; a detection with no disturbance this long before is a false alarm
-    log_rate: float = 30.0  # samples per second of the logged signals (plots, metrics)
+    # cornerSubPix with a 9 x 9 window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it),
+    # centrally symmetric points (and, with max_view_shift_sigmas, points fixed on their face), the
+    # depth on the face's fitted plane (docs/hand_eye.md, "The points")
+    refinement = RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3,
+                                  depth_plane=True, max_view_shift_sigmas=config.max_view_shift_sigmas)
+    return HandEyeParts(config, coordination, candidates, refinement,
+                        CameraMotionConfig(enabled=config.camera_motion))
 
 
 @dataclass
@@ -171,11 +198,12 @@ class HandEyeLoop:
         return self.detector.GetOutputPort("confirm")
 
 
-def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: HandEyeConfig,
+def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: HandEyeConfig | HandEyeParts,
                       perception: BodyDetectionConfig, joint_ranges=None, motion_seed: int = 0,
                       ) -> HandEyeLoop:  # fmt: skip
     """Adds the tracker, detector, candidate identifiers and state machine, connected to each other.
-    With ``hand_eye.camera_motion.enabled``, a ``CameraMotionDetector`` feeds the state machine's
+    ``hand_eye`` is the user's ``HandEyeConfig`` or every setting (``HandEyeParts``).
+    With ``hand_eye.camera_motion``, a ``CameraMotionDetector`` feeds the state machine's
     ``camera_motion``; with ``hand_eye.identifying_motion_interval`` > 0, an ``IdentifyingMotion``
     (far postures within ``joint_ranges``, n x [lower, upper] rad, drawn from ``motion_seed``)
     forwards the detector's confirming requests and adds its own while identifying. Left for the
@@ -184,6 +212,8 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     depth), the joint positions
     (``HandEyeLoop.actuator_inputs``), the candidates' ``X_WH``, and the uses of
     ``HandEyeLoop.motion_confirm()`` and ``state_machine.pause``. Raises ValueError on bad settings."""
+    parts = hand_eye if isinstance(hand_eye, HandEyeParts) else hand_eye_parts(hand_eye)
+    hand_eye = parts.config
     if hand_eye.identifying_motion_interval > 0:
         if joint_ranges is None:
             raise ValueError("the identifying motion needs joint_ranges (n x [lower, upper] rad, the "
@@ -194,17 +224,17 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         if not (hand_eye.identifying_motion_reach >= 0 and np.isfinite(hand_eye.identifying_motion_reach)):
             raise ValueError("hand_eye.identifying_motion_reach must be >= 0 rad (0: off), got "
                              f"{hand_eye.identifying_motion_reach}")
-    criteria, rule = hand_eye.coordination.criteria(), hand_eye.coordination.rule()
-    # Copies with their values checked again: a scenario file or a user sets fields after construction.
-    candidate_params = dataclasses.replace(hand_eye.candidates)
+    criteria, rule = parts.coordination.criteria(), parts.coordination.rule()
+    # Copies with their values checked again: a user may set fields after construction.
+    candidate_params = dataclasses.replace(parts.candidates)
     # The refiner's windows scaled to the camera (loops.pixel_scale).
-    refinement = scaled(dataclasses.replace(hand_eye.refinement), pixel_scale(info),
+    refinement = scaled(dataclasses.replace(parts.refinement), pixel_scale(info),
                         lengths=("max_shift_px",),
                         windows=("corner_window_px", "depth_window_px", "blob_window_px",
                                  "symmetry_window_px"))
     body = add_body_detection(builder, info, num_joints, fps, perception)
     tracker, detector, period = body.tracker, body.detector, 1.0 / fps
-    formulation = EyeToHandFormulation(criteria, hand_eye.coordination.forgetting_factor)
+    formulation = EyeToHandFormulation(criteria, parts.coordination.forgetting_factor)
     depth_check = info if candidate_params.free_space_radius > 0 else None
     candidates = builder.AddSystem(CandidateIdentifiers(formulation, candidate_params, period, depth_check))
     candidates.set_name("candidate_identifiers")
@@ -220,12 +250,12 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     connect_identify_observe(builder, candidates, machine)
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     camera = None
-    if not hand_eye.camera_motion.enabled:
+    if not parts.camera_motion.enabled:
         builder.Connect(detector.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
     else:  # the camera notices its own motion from the static scene
         camera = builder.AddSystem(CameraMotionDetector(
             num_joints, tracker.grid.num_cells, (info.width(), info.height()),
-            hand_eye.camera_motion.params(info.focal_x()), period=period, offset=0.75 * period,
+            parts.camera_motion.params(info.focal_x()), period=period, offset=0.75 * period,
             camera_info=info))  # fmt: skip
         camera.set_name("camera_motion_detector")
         builder.Connect(tracker.GetOutputPort("tracked_features"), camera.GetInputPort("tracked_features"))

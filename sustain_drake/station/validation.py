@@ -13,10 +13,9 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
 
-from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.identification.differentiation import savitzky_golay_weights
 from sustain_drake.loops.body_detection import BodyDetectionConfig
-from sustain_drake.loops.hand_eye import CameraMotionConfig, HandEyeConfig
+from sustain_drake.loops.hand_eye import HandEyeConfig, hand_eye_parts
 from sustain_drake.loops.identify_observe import CoordinationConfig
 from sustain_drake.loops.payload import (
     PAYLOAD_MODES,
@@ -25,7 +24,6 @@ from sustain_drake.loops.payload import (
     QuasiStaticConfig,
 )
 from sustain_drake.perception.camera_motion import CameraMotionParams
-from sustain_drake.perception.point_refinement import RefinementParams
 from sustain_drake.station.models import ARMS
 from sustain_drake.station.random_disturbances import SETTLE, RandomDisturbances
 from sustain_drake.station.scenario import (
@@ -190,24 +188,6 @@ RANGES: dict[type, dict[str, Range]] = {
         "allowable_error_factor": _above(0, 1e9), "max_consecutive_violations": AT_LEAST_ONE,
         "pause_after_convergence": WAIT, "noise_rms": _from(0, 100),
     },
-    CandidateParams: {
-        "max_candidates": _from(1, 64), "max_hand_radius": _above(0, 5, "m"),
-        "gate_margin": _above(0, 1, "m"), "max_lost_time": SPAN,
-        "max_unconverged_time": _above(0, DAY, "s"), "reacquire_radius": _above(0, 1, "m"),
-        "pose_tolerance": _above(0, 1, "s"), "reject_rms": _above(0, 1, "m"),
-        "observation_jump": _above(0, 5, "m"), "observe_min_samples": AT_LEAST_ONE,
-        "observe_consistency": _above(0, 1000), "primary_failures": AT_LEAST_ONE,
-        "keep_camera_min_samples": AT_LEAST_ONE, "min_rotation_spread": _above(0, 2 * math.pi, "rad"),
-        "joint_min_samples": AT_LEAST_ONE, "joint_consistency": _above(0, 1000),
-        "max_archived": _from(0, 1000), "max_observers": _from(0, 64), "refine_interval": WAIT,
-        "observe_radius": _above(0, 5, "m", off_inf=True), "blind_min_samples": COUNT,
-        "stitch_radius": _from(0, 1, "m"), "verified_overlap": COUNT,
-        "free_space_radius": _from(0, 0.5, "m"), "min_point_spread": _above(0, 5, "m"),
-        "turn_radius": _above(0, 1, "m"), "turn_max_shift": _above(0, 5, "m"),
-        "turn_min_samples": AT_LEAST_ONE, "turn_scene_shift": _above(0, 1, "m"),
-        "min_view_change": _from(0, 1, "m"), "min_rotation_lever": _from(0, 5, "m"),
-        "min_adopt_rotation_spread": _from(0, 2 * math.pi, "rad"), "motion_min_samples": COUNT,
-    },
     CameraMotionParams: {
         "min_background": _from(3, 10_000), "anchor_time": _from(0, 60, "s"),
         "inlier_px": _above(0, 100, "px"), "min_inlier_fraction": _above(0, 1),
@@ -216,23 +196,14 @@ RANGES: dict[type, dict[str, Range]] = {
         "min_frames": _from(1, 1000), "move_px": _above(0, 4096, "px"),
         "view_still_px": _from(0, 100, "px"), "turn_frames": _from(0, 1000),
     },
-    CameraMotionConfig: {
-        "min_background": _from(3, 10_000), "anchor_time": _from(0, 60, "s"),
-        "move_angle": _above(0, 1, "rad"), "inlier_angle": _above(0, 0.2, "rad"),
-        "still_angle": _from(0, 0.2, "rad"), "feature_still_angle": _from(0, 0.2, "rad"),
-        "view_still_angle": _from(0, 0.2, "rad"),
-    },
     HandEyeConfig: {
+        "max_hand_radius": _above(0, 5, "m"), "tool_radius": _above(0, 5, "m", off_inf=True),
+        "min_samples": AT_LEAST_ONE, "max_expected_rms": _above(0, 100, "m"),
+        "allowable_error_factor": _above(0, 1e9), "max_consecutive_violations": AT_LEAST_ONE,
+        "pause_after_convergence": WAIT, "max_candidates": _from(1, 64),
         "identifying_motion_interval": WAIT, "identifying_motion_max_hold": WAIT,
-        "identifying_motion_reach": _from(0, 2 * math.pi, "rad"), "false_alarm_window": WAIT,
-        "log_rate": _above(0, 1000, "Hz"),
-    },
-    RefinementParams: {
-        "corner_window_px": _from(0, 50), "max_shift_px": _above(0, 100, "px"),
-        "depth_window_px": _from(0, 50), "surface_tolerance": _above(0, 1, "m"),
-        "min_fraction": _above(0, 1), "blob_window_px": _from(0, 50),
-        "max_incidence_deg": _above(0, 90, "deg"), "symmetry_window_px": _from(0, 50),
-        "min_symmetry": _from(-1, 1), "max_view_shift_sigmas": _from(0, 100),
+        "identifying_motion_reach": _from(0, 2 * math.pi, "rad"), "max_view_shift_sigmas": _from(0, 100),
+        "false_alarm_window": WAIT, "log_rate": _above(0, 1000, "Hz"),
     },
     KinestheticConfig: {"period": _from(1e-4, 1, "s"), "min_touch_force": _from(0, 1000, "N"),
                         "eval_min_force": _from(0, 1000, "N")},
@@ -482,10 +453,6 @@ def _check_math_layer(s: Scenario) -> None:
     """The math layer's settings check their combinations on construction (e.g. move_px > still_px);
     a loaded file set their fields one by one, so construct them (whether or not the experiment is on)."""
     he, k, bd = s.hand_eye, s.kinesthetic, s.body_detection
-    cm = he.camera_motion
-    _check(cm.move_angle > cm.still_angle >= cm.view_still_angle, "hand_eye.camera_motion needs "
-           f"move_angle > still_angle >= view_still_angle, got {shown(cm.move_angle)}, "
-           f"{shown(cm.still_angle)}, {shown(cm.view_still_angle)}")
     _check(bd.response_window is None or bd.response_window <= bd.tau_a,
            f"body_detection.response_window must be at most tau_a ({shown(bd.tau_a)} s) or null, got "
            f"{shown(bd.response_window)}")
@@ -495,12 +462,7 @@ def _check_math_layer(s: Scenario) -> None:
                f"{shown(he.identifying_motion_max_hold)} < {shown(he.identifying_motion_interval)}")
     checks = (("body_detection", bd.coincidence_params), ("body_detection", bd.feature_params),
               ("body_detection", bd.tracker_params),
-              ("hand_eye.coordination", he.coordination.criteria),
-              ("hand_eye.coordination", he.coordination.rule),
-              ("hand_eye.candidates", lambda: dataclasses.replace(he.candidates)),
-              ("hand_eye.refinement", lambda: dataclasses.replace(he.refinement)),
-              # the thresholds' combinations do not depend on the focal length
-              ("hand_eye.camera_motion", lambda: he.camera_motion.params(1.0)),
+              ("hand_eye", lambda: hand_eye_parts(he).coordination.rule()),
               ("kinesthetic.coordination", lambda: k.coordination.criteria(has_rotation=False)),
               ("kinesthetic.coordination", k.coordination.rule),
               ("kinesthetic.dynamic", lambda: savitzky_golay_weights(
