@@ -12,9 +12,9 @@ adopted at the re-convergence (mm / deg); then the totals against the targets: e
 detected within 1 s and re-converged within 15 s, no false alarm, each adopted camera within 2 mm
 and 0.2 deg, resident memory growth under 5 % from minute 5 to minute 30. Memory is the process's
 resident set (``/proc/self/statm``) every simulated minute; the logs the run keeps for its metrics
-grow with the run by design, so their size is reported beside it (the growth without them is the
-loop's own). ``--out`` holds ``metrics.json``, ``log.npz``, ``hand_eye_fig9.png``, ``memory.json``
-and ``soak.md`` (the printed table).
+go to disk every simulated minute (``experiments.log_spool``), and the samples they hold in memory
+at each reading are reported beside it. ``--out`` holds ``metrics.json``, ``log.npz``,
+``hand_eye_fig9.png``, ``memory.json`` and ``soak.md`` (the printed table).
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results_page import publish  # noqa: E402
 
+from sustain_drake.experiments.log_spool import log_sinks  # noqa: E402
 from sustain_drake.files import write_atomically  # noqa: E402
 from sustain_drake.station.scenario_files import load_scenario  # noqa: E402
 
@@ -50,14 +51,12 @@ def resident_bytes() -> int:
 
 
 def log_bytes(simulator) -> int:
-    """The bytes of samples the diagram's vector logs hold (samples x (size + time) x 8)."""
-    from pydrake.systems.primitives import VectorLogSink
-
+    """The bytes of samples the diagram's vector logs hold in memory now (samples x (size + time) x
+    8); the run moves them to disk every ``LOG_SPOOL_INTERVAL`` (``experiments.log_spool``)."""
     context, total = simulator.get_context(), 0
-    for system in simulator.get_system().GetSystems():
-        if isinstance(system, VectorLogSink):
-            log = system.FindLog(context)
-            total += 8 * log.num_samples() * (log.get_input_size() + 1)
+    for sink in log_sinks(simulator.get_system()):
+        log = sink.FindLog(sink.GetMyContextFromRoot(context))
+        total += 8 * log.num_samples() * (log.get_input_size() + 1)
     return total
 
 
@@ -203,10 +202,9 @@ def memory_lines(memory: dict, end: float) -> list[str]:
         lines.append(
             f"- resident memory {a['rss_mb']:.0f} MB at {a['time_s'] / 60:.0f} min, {b['rss_mb']:.0f} MB at "
             f"{b['time_s'] / 60:.0f} min: growth {100 * growth['growth']:.1f} % "
-            f"({_verdict(growth['growth'] < MAX_GROWTH)} against < 5 %); the logs kept for the metrics grew "
-            f"{b['logs_mb'] - a['logs_mb']:.0f} MB of samples ({100 * growth['logs_growth']:.1f} %; Drake's "
-            f"VectorLog doubles its buffer when full, so up to twice that is allocated), the rest "
-            f"{100 * growth['growth_without_logs']:.1f} %")
+            f"({_verdict(growth['growth'] < MAX_GROWTH)} against < 5 %); the logs' samples in memory (the "
+            f"rest is on disk) changed by {b['logs_mb'] - a['logs_mb']:+.1f} MB "
+            f"({100 * growth['logs_growth']:+.1f} %), the rest {100 * growth['growth_without_logs']:+.1f} %")
         series = ", ".join(f"{s['time_s'] / 60:.0f} min {s['rss_mb']:.0f}" for s in memory["samples"]
                            if round(s["time_s"]) % 300 == 0)
         lines.append(f"- resident memory (MB) by simulated minute: {series}")

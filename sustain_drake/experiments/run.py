@@ -26,6 +26,7 @@ from pydrake.systems.primitives import LogVectorOutput
 from tqdm import tqdm
 
 from sustain_drake.experiments import EXPERIMENTS
+from sustain_drake.experiments.log_spool import LogSpool
 from sustain_drake.files import write_atomically
 from sustain_drake.station import Scenario, build_station, load_scenario
 from sustain_drake.station.meshcat import make_local_meshcat
@@ -108,16 +109,9 @@ def simulate_scenario(scenario: Scenario, out: str | Path, *, label: str = "scen
                                set_visualizations_while_recording=live)
     simulator.Initialize()
     start = time.perf_counter()
-    step = min(0.1, duration)
-    with tqdm(total=round(duration, 3), unit="sim s", disable=not sys.stderr.isatty(),
-              bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim s [{elapsed}<{remaining}]") as bar:
-        t = 0.0
-        while t < duration - 1e-9:
-            t = min(t + step, duration)
-            simulator.AdvanceTo(t)
-            if on_step is not None:
-                on_step(t, simulator)
-            bar.update(t - bar.n)
+    with LogSpool(diagram) as spool:  # the logs on disk while the run goes on (flat memory)
+        _advance(simulator, duration, spool, on_step)
+        spool.restore(simulator.get_context())
     wall = time.perf_counter() - start
 
     out.mkdir(parents=True, exist_ok=True)
@@ -137,6 +131,30 @@ def simulate_scenario(scenario: Scenario, out: str | Path, *, label: str = "scen
         metrics_path = out / "metrics.json"
         write_atomically(metrics_path, json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     return SimulationResult(duration, wall, replay_path, log_path, metrics_path)
+
+
+# s of simulated time between moves of the logs to disk (LogSpool): a minute of a hand-eye run's
+# logs is about 2 MB, so the logs' buffers stay that small
+LOG_SPOOL_INTERVAL = 60.0
+
+
+def _advance(simulator, duration: float, spool: LogSpool, on_step) -> None:
+    """Advances ``simulator`` to ``duration`` in 0.1 s steps (a progress bar on a terminal), the
+    logs moved to disk every ``LOG_SPOOL_INTERVAL``, ``on_step(t, simulator)`` after each step."""
+    step = min(0.1, duration)
+    next_drain = LOG_SPOOL_INTERVAL
+    with tqdm(total=round(duration, 3), unit="sim s", disable=not sys.stderr.isatty(),
+              bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim s [{elapsed}<{remaining}]") as bar:
+        t = 0.0
+        while t < duration - 1e-9:
+            t = min(t + step, duration)
+            simulator.AdvanceTo(t)
+            if t >= next_drain - 1e-9:
+                spool.drain(simulator.get_context())
+                next_drain += LOG_SPOOL_INTERVAL
+            if on_step is not None:
+                on_step(t, simulator)
+            bar.update(t - bar.n)
 
 
 def simulate_file(path: str | Path, name: str | None = None, seed: int | None = None,
