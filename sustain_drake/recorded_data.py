@@ -29,7 +29,9 @@ import io
 import json
 import math
 import numbers
+from collections.abc import Mapping
 from pathlib import Path
+from types import MappingProxyType
 from typing import NamedTuple
 
 import numpy as np
@@ -166,7 +168,7 @@ class PointTracks(NamedTuple):
 
     points: dict
     labelled: bool
-    left_out: dict = {}
+    left_out: Mapping = MappingProxyType({})  # read-only: a default shared by every instance
 
 
 def read_point_tracks_csv(path: str | Path, num_samples: int | None = None) -> PointTracks:
