@@ -42,8 +42,7 @@ class HandEyeConfig:
     with (docs/results.md)."""
 
     enabled: bool = False  # run the hand-eye experiment on the scenario's world
-    # the depth camera's noise sigma(z) (m), the sensor's model: the allowable error's floor (its
-    # sigma at 0.6 m, noise_floor) and the refiner's view-shift gate (a simulated station passes its own)
+    # the depth sensor's noise sigma(z), m: sets the allowable error's floor and the view-shift gate
     depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)
     max_hand_radius: float = 0.6  # m: farthest a tracked point on the hand or its tool lies from the hand
     tool_radius: float = 0.1  # m: points this near the tool point in H are the tool's (a slip moves them)
@@ -55,18 +54,14 @@ class HandEyeConfig:
     pause_after_convergence: float = 3.0  # s the motion pauses after a convergence, the paper's
     max_candidates: int = 8  # count: identifiers run at a time, one per candidate point (the cost per frame)
     camera_motion: bool = True  # the camera notices its own motion from the static scene (needs one in view)
-    # s; > 0: while identifying, a far posture is asked of the babbling when no confirming request
-    # came for this long (systems.identifying_motion; needs the joint ranges); 0: off
+    # s without a confirming request before a far posture is asked for while identifying; 0: off
     identifying_motion_interval: float = 1.0
-    # s (>= the interval): after a first convergence, a far posture also comes when the arm stayed
-    # within 0.2 rad of one posture this long, however often the detector asks
+    # s (>= the interval) the arm may hold within 0.2 rad of one posture before a far one is asked for
     identifying_motion_max_hold: float = 3.0
-    # rad; > 0: while the candidates ask for more motion, postures within this (max-norm) of the
-    # arm's when the ask began (the hand turns while the points' faces stay in view); 0: anywhere
+    # rad (max-norm) from the arm's posture that the postures asked for more motion keep to; 0: anywhere
     identifying_motion_reach: float = 0.1
     refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
-    # besides centrally symmetric points, keep points that a 45 deg tilt of their face moves by at
-    # most this many depth-noise sigmas (points without a checker; docs/hand_eye.md); 0: symmetric only
+    # depth sigmas a 45 deg tilt may move a non-symmetric point on its face and keep it; 0: symmetric only
     max_view_shift_sigmas: float = 0.0
     false_alarm_window: float = 2.0  # s; a detection with no disturbance this long before is a false alarm
     log_rate: float = 30.0  # samples per second of the logged signals (plots, metrics)
