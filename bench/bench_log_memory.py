@@ -68,9 +68,9 @@ def main() -> int:
              "| logs | " + " | ".join(f"{t / 60:.0f} min" for t, _ in series["kept"]) + f" | growth from "
              f"minute {FROM_S / 60:.0f} |", "|---|" + "---:|" * (len(series["kept"]) + 1)]
     for mode, label in (("drained", "on disk every minute (the default)"), ("kept", "kept in memory")):
-        values = dict(series[mode])
-        start, end = values.get(FROM_S), series[mode][-1][1]
-        growth = f"{100 * (end - start) / start:+.1f} %" if start else "-"
+        start = min(series[mode], key=lambda sample: abs(sample[0] - FROM_S))[1]  # t is a sum of steps
+        end = series[mode][-1][1]
+        growth = f"{100 * (end - start) / start:+.1f} %"
         lines.append(f"| {label} | " + " | ".join(f"{v:.0f}" for _, v in series[mode]) + f" | {growth} |")
     print("\n".join(lines))
     if args.results:
