@@ -276,3 +276,31 @@ def test_features_still_while_the_arm_moves_are_static_scene_not_hand_candidates
     # drift adds up, it is not static.
     state, _ = run(scene, 30, lambda k: {"robot": shift([0.15, 0.0])}, lambda k: True, state, start=62)
     assert not camera_motion.static_features(state, hand_ids, PARAMS).any()
+
+
+def test_a_slow_pan_while_the_arm_rests_is_a_camera_move():
+    """A pan whose every frame stays below ``still_px`` (a head's slow ramp, then a creep) is one
+    camera move: the anchors' drift from their still pixels adds up. Judged frame by frame alone,
+    every anchor restarts once ``feature_still_px`` away, all in one frame, and the move is lost."""
+    scene = Scene(seed=11, background=40, person=0, robot=15)
+    state, _ = run(scene, 30, lambda k: {})
+    per_frame = 0.9 * PARAMS.still_px
+    ramp = [0.1 * per_frame, 0.4 * per_frame, 0.7 * per_frame] + [per_frame] * 17
+
+    def pan(k):
+        return {"background": shift([ramp[k - 30], 0.0]), "robot": shift([ramp[k - 30], 0.0])}
+
+    state, out = run(scene, len(ramp), pan, state=state, start=30)
+    assert sum(ramp) > 2 * PARAMS.move_px
+    assert state.moves == 1 and state.last.judged
+    assert state.accumulated_px == pytest.approx(sum(ramp), rel=0.1)
+    state, out = run(scene, 10, lambda k: {}, state=state, start=30 + len(ramp))
+    assert state.moves == 1 and not state.moving
+    # Still, with the tracker's sub-pixel noise: no episode.
+    rng = np.random.default_rng(3)
+
+    def jitter(k):
+        return {"background": lambda q: q + rng.normal(0.0, 0.05, q.shape)}
+
+    state, out = run(scene, 60, jitter, state=state, start=60)
+    assert state.moves == 1 and out[:, 0].max() == 0

@@ -25,6 +25,11 @@ body's features and a walking person a minority of them. So, per frame:
   displacement (below) exceeds ``still_px``. The arm or a person starting to move over a still
   background leaves the still anchors as the consensus (displacement 0); fewer anchors than
   ``min_background`` say nothing (the frame is not judged moving).
+  A slow move (a head's ramp, a fraction of a pixel per frame at first, or a creep) is seen by
+  its sum: when the anchors, fitted from their still pixels (where each came to rest, or where the
+  last moving frame left it) to where they are now, moved together by more than ``still_px``, the
+  frame moves by that motion (else every anchor would restart once ``feature_still_px`` away, all
+  in the same frame, and no frame of the move be judged).
 
 **It needs a textured static scene.** In the plain room (wall, floor and table; the station
 without ``backdrop``) the tracker holds 0-7 static corners outside the body cells (2 when the
@@ -377,6 +382,16 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
         still_enough = static_features(state, ids, params)
     anchors = finite & tracked & still_enough & (arm_at_rest | ~robot)
     frame = frame_motion(p_prev[anchors], p_px[anchors], params, points)
+    drift = None  # the anchors' motion since their still pixels, when it makes this frame move
+    if frame.judged and not frame.moving:
+        # A slow move (a head's ramp, a creep): each frame at most still_px, but the anchors drifted
+        # together from their still pixels (where each came to rest, or the last moving frame left
+        # it) by more; each would restart once feature_still_px away, all in one frame, and no frame
+        # of the move be judged. The frame moves by that drift (frames not composed yet).
+        since_still = frame_motion(_remembered(state, ids, state.still_px)[anchors], p_px[anchors],
+                                   params, points)  # fmt: skip
+        if since_still.moving:
+            frame, drift = replace(frame, moving=True), since_still.M
     # Memory: a feature moving against the scene restarts its still time; so does a feature seeded
     # now. While the scene moves: its flow off the frame's motion (and its still pixel follows);
     # else: its distance from where it became still (a slow drift adds up over frames).
@@ -400,7 +415,7 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
                   last_time=float(time), last=frame, arm_moving=arm_moving, arm_clock=arm_clock,
                   arm_still_since=arm_still_since, judged_still_since=judged_still)
     if frame.moving:
-        M = np.vstack([frame.M, [0.0, 0.0, 1.0]])
+        M = np.vstack([frame.M if drift is None else drift, [0.0, 0.0, 1.0]])
         if not state.moving:  # onset: a new episode; the still view so far is the view before
             before = state.view if 0 < params.turn_frames <= state.view.frames else None
             new = replace(new, moving=True, declared=False, M_episode=np.eye(3), frames=0, view=SceneView(),
