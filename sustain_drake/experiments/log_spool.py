@@ -32,7 +32,6 @@ class LogSpool:
     (``restore``); ``close`` removes the folder. Use as a context manager."""
 
     def __init__(self, diagram):
-        self._diagram = diagram
         self._sinks = log_sinks(diagram)
         self._folder = tempfile.TemporaryDirectory(prefix="sustain_drake_logs_")
         self._chunks: list[Path] = []
@@ -65,19 +64,21 @@ class LogSpool:
 
     def restore(self, root_context) -> None:
         """Every sink's log holds all its samples again, the drained ones first, in order."""
+        times = {k: [] for k in range(len(self._sinks))}
+        data = {k: [] for k in range(len(self._sinks))}
+        for path in self._chunks:  # each file read once
+            with np.load(path) as chunk:
+                for k in times:
+                    if f"t{k}" in chunk:
+                        times[k].append(chunk[f"t{k}"])
+                        data[k].append(chunk[f"x{k}"])
         for k, sink in enumerate(self._sinks):
             log = self._log(sink, root_context)
-            times, data = [], []
-            for path in self._chunks:
-                with np.load(path) as chunk:
-                    if f"t{k}" in chunk:
-                        times.append(chunk[f"t{k}"])
-                        data.append(chunk[f"x{k}"])
-            if not times:
+            if not times[k]:
                 continue
-            times.append(log.sample_times().copy())
-            data.append(log.data().copy())
-            t, x = np.concatenate(times), np.concatenate(data, axis=1)
+            times[k].append(log.sample_times().copy())
+            data[k].append(log.data().copy())
+            t, x = np.concatenate(times[k]), np.concatenate(data[k], axis=1)
             log.Clear()
             log.Reserve(t.size)
             for i in range(t.size):
