@@ -45,7 +45,8 @@ def other_link(X_WH, k, p_LQ):
 
 def run(frames, bank=None, reset=0.0, reference=None, start=0, params=PARAMS,
         scene_still_since=math.inf, pose=hand_pose):  # fmt: skip
-    """frames(k, X_WH, rng) -> (ids, p_CP, valid, on_body); one frame per tick; the hand at pose(k)."""
+    """frames(k, X_WH, rng) -> (ids, p_CP, valid, on_body[, symmetric]); one frame per tick; the
+    hand at pose(k)."""
     bank = CandidateBank() if bank is None else bank
     rng = np.random.default_rng(3)
     for k in range(start, start + 10_000):
@@ -53,9 +54,10 @@ def run(frames, bank=None, reset=0.0, reference=None, start=0, params=PARAMS,
         out = frames(k, X, rng)
         if out is None:
             return bank, k
-        ids, p, valid, body = out
+        ids, p, valid, body, *symmetric = out
         frame = FrameInput(k * DT, reset, X, k * DT, np.array(ids), np.array(p), np.array(valid),
-                           np.array(body), reference, scene_still_since=scene_still_since)
+                           np.array(body), reference, scene_still_since=scene_still_since,
+                           symmetric=np.array(symmetric[0]) if symmetric else None)
         bank = candidates.step(bank, params, CRITERIA, frame)
     return bank, k
 
@@ -972,3 +974,36 @@ def test_joint_weighted_trusts_each_point_by_its_own_error():
     mse = np.array([candidates.own_fit(c.statistic, est.R_WC, est.p_WC)[1] for c in exact])
     assert mse.max() < 1e-12  # round-off: the floor decides
     assert np.allclose(candidates.fitting.inverse_variance_weights(mse), 1.0)
+
+
+def test_symmetric_points_come_first_and_points_kept_for_their_view_shift_fill_in():
+    """While a frame has two centrally symmetric body points (a leader and its witness), points kept
+    for their view shift alone are not admitted; with fewer they are, marked as second choice."""
+    p_weak = [P_TOOL + [0.02 * i, -0.01, 0.01] for i in range(1, 4)]
+
+    def frames(k, X, rng, first=(1, 2)):
+        if k >= 40:
+            return None
+        ids = list(first) + [10, 11, 12]
+        points = [seen(X, P_TOOL + [0.0, 0.01 * i, 0.0], rng) for i in range(len(first))]
+        points += [seen(X, p, rng) for p in p_weak]
+        return ids, points, [True] * len(ids), [True] * len(ids), [True] * len(first) + [False] * 3
+
+    bank, _ = run(frames)
+    assert sorted(c.feature_id for c in bank.candidates) == [1, 2]
+    assert all(c.symmetric for c in bank.candidates)
+    bank, _ = run(lambda k, X, rng: frames(k, X, rng, first=(1,)))
+    assert sorted(c.feature_id for c in bank.candidates) == [1, 10, 11, 12]
+    assert [c.symmetric for c in bank.candidates] == [True, False, False, False]  # symmetric first
+    # Without the refiner's ranking (None) every point is equal, none preferred.
+    bank, _ = run(lambda k, X, rng: frames(k, X, rng)[:4] if k < 40 else None)
+    assert sorted(c.feature_id for c in bank.candidates) == [1, 2, 10, 11, 12]
+
+
+def test_the_joint_refinement_leaves_out_second_choice_points_when_two_symmetric_points_join():
+    symmetric = [candidates.Candidate(i, np.zeros(1), None, 0.0, 0.0, symmetric=True) for i in (1, 2)]
+    weak = [candidates.Candidate(i, np.zeros(1), None, 0.0, 0.0) for i in (10, 11)]
+    assert candidates.fitting.first_choice(symmetric[1:] + weak, symmetric[0]) == symmetric[1:]
+    # A symmetric leader alone, or none at all: every member joins.
+    assert candidates.fitting.first_choice(weak, symmetric[0]) == weak
+    assert candidates.fitting.first_choice(symmetric[1:] + weak, weak[0]) == symmetric[1:] + weak

@@ -1,5 +1,6 @@
 """Drift-free points of tracked features (perception.point_refinement) on synthetic images."""
 
+import dataclasses
 import warnings
 
 import cv2
@@ -13,6 +14,7 @@ from sustain_drake.perception.point_refinement import (
     central_symmetry,
     fixed_on_surface,
     local_depth,
+    refine_features,
     refine_pixels,
     refine_points,
     view_shift,
@@ -268,18 +270,24 @@ def test_the_view_shift_gate_is_relative_to_the_depth_noise_at_the_point():
     points, z = np.vstack([corner, on_edge]), np.array([0.8, 0.8])
     # The L corner moves ~0.2 px (~1.2 mm at 0.8 m with f = 145 px) under a 45 deg tilt: within a
     # noise of 2 mm, beyond one of 0.5 mm; the point on the edge slides along it under any noise.
-    assert fixed_on_surface(square, points, z, K.fx, params, lambda z: np.full_like(z, 0.002)).tolist() \
-        == [True, False]
-    assert not fixed_on_surface(square, points, z, K.fx, params, lambda z: np.full_like(z, 0.0005)).any()
+    fixed, symmetric = fixed_on_surface(square, points, z, K.fx, params, lambda z: np.full_like(z, 0.002))
+    assert fixed.tolist() == [True, False] and not symmetric.any()  # kept for its view shift only
+    assert not fixed_on_surface(square, points, z, K.fx, params, lambda z: np.full_like(z, 0.0005))[0].any()
     # A saddle is kept by its symmetry whatever the noise.
     gray = cv2.cvtColor(checker_image(), cv2.COLOR_RGBA2GRAY)
-    assert fixed_on_surface(gray, np.array([SADDLE]), z[:1], K.fx, params, lambda z: 0.0 * z).all()
+    fixed, symmetric = fixed_on_surface(gray, np.array([SADDLE]), z[:1], K.fx, params, lambda z: 0.0 * z)
+    assert fixed.all() and symmetric.all()
     depth = np.full((K.height, K.width), 0.8, np.float32)
     with pytest.raises(ValueError, match="depth_sigma"):
         refine_points(square, depth, corner, K, params)
-    _, valid = refine_points(square, depth, np.vstack([corner, on_edge]), K, params,
-                             depth_sigma=lambda z: np.full_like(z, 0.002))
-    assert valid.tolist() == [True, False]
+    refined = refine_features(square, depth, np.vstack([corner, on_edge]), K, params,
+                              depth_sigma=lambda z: np.full_like(z, 0.002))
+    assert refined.valid.tolist() == [True, False] and not refined.symmetric.any()
+    # Without the gate the symmetry test alone keeps points: every valid one is symmetric.
+    checker_depth = np.full((K.height, K.width), 0.8, np.float32)
+    plain = refine_features(checker_image(), checker_depth, np.array([SADDLE]), K,
+                            dataclasses.replace(params, max_view_shift_sigmas=0.0))
+    assert plain.valid.tolist() == plain.symmetric.tolist() == [True]
 
 
 def _print_texture(rng, n):

@@ -62,7 +62,7 @@ class HandEyeConfig:
     identifying_motion_reach: float = 0.1
     refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
     # depth sigmas a 45 deg tilt may move a non-symmetric point on its face and keep it; 0: symmetric only
-    max_view_shift_sigmas: float = 0.0
+    max_view_shift_sigmas: float = 1.0
     false_alarm_window: float = 2.0  # s; a detection with no disturbance this long before is a false alarm
     log_rate: float = 30.0  # samples per second of the logged signals (plots, metrics)
 

@@ -161,6 +161,9 @@ class TrackedFeatures:
       must not be used (depth hole: 0, inf or NaN, or outside the depth image).
     - ``valid``: True where ``p_CP`` is a measured point.
     - ``cell``: grid cell index of ``p_px``.
+    - ``symmetric``: True where a ``FeatureRefiner`` found the image centrally symmetric about the
+      point (a checker saddle, a mark's centre): the strongest sign of a point fixed on its surface;
+      all False from the tracker.
     - ``time``: time of the frame, seconds.
     """
 
@@ -170,6 +173,7 @@ class TrackedFeatures:
     p_CP: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     valid: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     cell: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    symmetric: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     time: float = 0.0
 
     def __len__(self) -> int:
@@ -459,5 +463,5 @@ def track_frame(state: TrackerState, image: np.ndarray, depth: np.ndarray | None
     new.sdot = sdot
     new.features = TrackedFeatures(
         ids=ids.copy(), p_px=pts.astype(float), flow_px=flow, p_CP=p_CP, valid=valid,
-        cell=grid.cell_of(pts), time=float(time))
+        cell=grid.cell_of(pts), symmetric=np.zeros(ids.size, bool), time=float(time))
     return new

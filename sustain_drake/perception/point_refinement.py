@@ -32,6 +32,7 @@ needs fixed points (the candidate identifiers) refines the features it uses.
 # No "from __future__ import annotations": yaml_load_typed reads RefinementParams' real field types.
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -114,25 +115,27 @@ def refine_pixels(gray: np.ndarray, p_px: np.ndarray, params: RefinementParams):
 
 
 def fixed_on_surface(gray: np.ndarray, p_px: np.ndarray, z: np.ndarray, focal_px: float,
-                     params: RefinementParams, depth_sigma) -> np.ndarray:
+                     params: RefinementParams, depth_sigma) -> tuple[np.ndarray, np.ndarray]:
     """Which refined points (K x 2 px, at depths ``z`` m) stay on the same surface point as the view
-    changes (K,): the centrally symmetric ones (``symmetry_window_px``, ``min_symmetry``), and those
-    that a 45 deg tilt of their face moves on it by at most ``max_view_shift_sigmas`` times the
-    depth noise ``depth_sigma(z)`` (m, the sensor model) at their depth (``view_shift``, px, times
-    ``z`` over the focal length: a pixel spans ``z / f`` metres of a face seen head-on). A bias
-    within the noise of each sample is one the identification cannot tell from that noise; a
-    tighter gate keeps too few points on a tool without a checker."""
+    changes: ``(fixed, symmetric)`` (K, K). ``symmetric``: the centrally symmetric ones
+    (``symmetry_window_px``, ``min_symmetry``); ``fixed``: those, and those that a 45 deg tilt of
+    their face moves on it by at most ``max_view_shift_sigmas`` times the depth noise
+    ``depth_sigma(z)`` (m, the sensor model) at their depth (``view_shift``, px, times ``z`` over the
+    focal length: a pixel spans ``z / f`` metres of a face seen head-on). A bias within the noise of
+    each sample is one the identification cannot tell from that noise; a tighter gate keeps too few
+    points on a tool without a checker."""
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
-    fixed = np.zeros(p.shape[0], bool)
+    symmetric = np.zeros(p.shape[0], bool)
     if p.shape[0] == 0:
-        return fixed
+        return symmetric, symmetric.copy()
     if params.symmetry_window_px > 0:
-        fixed = central_symmetry(gray, p, params.symmetry_window_px) >= params.min_symmetry
+        symmetric = central_symmetry(gray, p, params.symmetry_window_px) >= params.min_symmetry
+    fixed = symmetric.copy()
     rest = np.flatnonzero(~fixed)
     if rest.size:
         shift = view_shift(gray, p[rest], params.corner_window_px) * np.asarray(z, float)[rest] / focal_px
         fixed[rest] = shift <= params.max_view_shift_sigmas * depth_sigma(np.asarray(z, float)[rest])
-    return fixed
+    return fixed, symmetric
 
 
 def central_symmetry(gray: np.ndarray, p_px: np.ndarray, half: int) -> np.ndarray:
@@ -364,29 +367,48 @@ def incidence(coef: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics)
     return np.arccos(np.clip(cosine, 0.0, 1.0))
 
 
-def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
-                  params: RefinementParams | None = None, return_pixels: bool = False, depth_sigma=None):
-    """``(p_CP, valid)`` (K x 3 in m, K) for tracked pixels ``p_px``: the sub-pixel corner near each
-    and the robust depth there, back-projected with the pinhole model (and the refined pixels,
-    K x 2, third, if ``return_pixels``). A point without a corner nearby, without a clean depth, or
-    (with ``max_view_shift_sigmas``) not fixed on its surface (``fixed_on_surface``, with the depth
-    noise ``depth_sigma(z)`` in m, required then) is not valid (a zero row, never NaN; its pixel is
-    the tracked one)."""
+class RefinedPoints(NamedTuple):
+    """``refine_features``' result for K tracked pixels."""
+
+    p_CP: np.ndarray  # K x 3, m; a zero row where not valid (never NaN)
+    valid: np.ndarray  # K: a point was measured
+    p_px: np.ndarray  # K x 2: the refined pixel where valid, else the tracked one
+    # K: valid and centrally symmetric (the symmetry test ran and passed); with the view-shift gate,
+    # a valid point that is not symmetric was kept because a tilt of its face does not move it
+    symmetric: np.ndarray
+
+
+def refine_features(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
+                    params: RefinementParams | None = None, depth_sigma=None) -> RefinedPoints:
+    """The sub-pixel corner near each tracked pixel ``p_px`` and the robust depth there,
+    back-projected with the pinhole model. A point without a corner nearby, without a clean depth,
+    or (with ``max_view_shift_sigmas``) not fixed on its surface (``fixed_on_surface``, with the
+    depth noise ``depth_sigma(z)`` in m, required then) is not valid."""
     params = RefinementParams() if params is None else params
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
+    none = np.zeros(p.shape[0], bool)
     if p.shape[0] == 0 or np.size(image) == 0 or np.size(depth) == 0:
-        out = np.zeros((p.shape[0], 3)), np.zeros(p.shape[0], bool)
-        return (*out, p.copy()) if return_pixels else out
+        return RefinedPoints(np.zeros((p.shape[0], 3)), none, p.copy(), none.copy())
     gray = to_gray(np.asarray(image))
     refined, ok = refine_pixels(gray, p, params)
     z = local_depth(depth, refined, params, intrinsics)
     ok &= np.isfinite(z) & (z > 0)
+    # refine_pixels keeps only symmetric points when the symmetry test runs without the gate
+    symmetric = ok.copy() if params.symmetry_window_px > 0 else none.copy()
     if params.max_view_shift_sigmas > 0 and ok.any():
         if depth_sigma is None:
             raise ValueError("refine_points: max_view_shift_sigmas needs the depth noise depth_sigma(z)")
-        ok[ok] = fixed_on_surface(gray, refined[ok], z[ok], intrinsics.fx, params, depth_sigma)
+        tested = ok.copy()
+        ok[tested], symmetric[tested] = fixed_on_surface(gray, refined[tested], z[tested], intrinsics.fx,
+                                                         params, depth_sigma)
     p_CP = np.zeros((p.shape[0], 3))
     p_CP[ok] = pinhole_points(refined[ok], z[ok], intrinsics)  # with the robust depth
-    if return_pixels:
-        return p_CP, ok, np.where(ok[:, None], refined, p)
-    return p_CP, ok
+    return RefinedPoints(p_CP, ok, np.where(ok[:, None], refined, p), symmetric & ok)
+
+
+def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
+                  params: RefinementParams | None = None, return_pixels: bool = False, depth_sigma=None):
+    """``(p_CP, valid)`` (K x 3 in m, K) of ``refine_features`` (and the pixels, K x 2, third, if
+    ``return_pixels``)."""
+    r = refine_features(image, depth, p_px, intrinsics, params, depth_sigma)
+    return (r.p_CP, r.valid, r.p_px) if return_pixels else (r.p_CP, r.valid)

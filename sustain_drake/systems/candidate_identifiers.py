@@ -19,7 +19,7 @@ from sustain_drake.identification.sustainable_identifier import Verdict
 from sustain_drake.perception.camera_motion import SceneTurn
 from sustain_drake.perception.free_space import depth_gap
 from sustain_drake.perception.optical_flow import TrackedFeatures
-from sustain_drake.perception.point_refinement import RefinementParams, refine_points
+from sustain_drake.perception.point_refinement import RefinedPoints, RefinementParams, refine_features
 from sustain_drake.systems.depth_noise import DepthNoiseModel
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
 from sustain_drake.systems.optical_flow_tracker import intrinsics_from_camera_info
@@ -45,8 +45,8 @@ class FeatureRefiner(LeafSystem):
         output_ports:
         - tracked_features
 
-    ``tracked_features`` out is the input with ``p_px``, ``p_CP`` and ``valid`` replaced (same ids
-    and order, so a detector's body flags still match). The images must be the frame the features
+    ``tracked_features`` out is the input with ``p_px``, ``p_CP``, ``valid`` and ``symmetric``
+    replaced (same ids and order, so a detector's body flags still match). The images must be the frame the features
     come from: when ``image_time`` (connected) differs from the features' ``time``, every feature is
     invalid for that evaluation (no point is better than a point from another frame). ``depth_noise``
     is the depth camera's noise model (``DepthNoiseModel``, its default if None), which
@@ -81,11 +81,12 @@ class FeatureRefiner(LeafSystem):
         color, depth = self._color.Eval(context).data, self._depth.Eval(context).data
         shape_ok = color.shape[:2] == (self._intrinsics.height, self._intrinsics.width) == depth.shape[:2]
         if len(features) == 0 or not (same_frame and shape_ok):
-            p_CP, valid, p_px = np.zeros((len(features), 3)), np.zeros(len(features), bool), features.p_px
+            none = np.zeros(len(features), bool)
+            refined = RefinedPoints(np.zeros((len(features), 3)), none, features.p_px, none)
         else:
-            p_CP, valid, p_px = refine_points(color, depth, features.p_px, self._intrinsics, self._params,
-                                              return_pixels=True, depth_sigma=self._depth_noise.sigma)
-        output.set_value(dataclasses.replace(features, p_px=p_px, p_CP=p_CP, valid=valid))
+            refined = refine_features(color, depth, features.p_px, self._intrinsics, self._params,
+                                      depth_sigma=self._depth_noise.sigma)
+        output.set_value(dataclasses.replace(features, **refined._asdict()))
 
 
 def _same_frame(image_time_port, context, features_time: float) -> bool:
@@ -262,6 +263,7 @@ class CandidateIdentifiers(LeafSystem):
             depth_gap=self._depth_gap(context, features.time),
             scene_turn=self._turn.Eval(context) if self._turn.HasValue(context) else None,
             scene_still_since=still, reset_reason=reason,
+            symmetric=features.symmetric if len(features.symmetric) == len(features) else None,
         )
         new = candidates.step(self.bank(context), self._params, self._formulation.criteria, frame)
         state.get_mutable_abstract_state(self._bank).set_value(Shared(new))

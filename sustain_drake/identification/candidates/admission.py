@@ -22,6 +22,7 @@ import numpy as np
 from sustain_drake.identification.candidates.bank import Candidate, CandidateBank
 from sustain_drake.identification.candidates.camera_move_recovery import near_known_points
 from sustain_drake.identification.candidates.fitting import (
+    FIRST_CHOICE_POINTS,
     best_p_HP_given_camera,
     explained,
     predicted_p_CP,
@@ -109,7 +110,9 @@ def _admit_new(bank, params, criteria, seen: SeenFrame, kept: list, rejected: fr
     # tool point (the tool's points) and the oldest (long tracks: often the hand's own).
     near_known = (near_known_points(bank, params, X_frame, p_CP, usable)
                   if params.turn_admit_known and bank.leader < 0 else np.zeros_like(on_body))
-    order = np.lexsort((ids, ~on_body, ~near_known, ~np.isin(ids, [i for i, _ in bank.known_points])))
+    order = np.lexsort((ids, ~on_body, ~seen.symmetric, ~near_known,
+                        ~np.isin(ids, [i for i, _ in bank.known_points])))
+    symmetric_only = _enough_symmetric(seen, near_known, rejected)
     if observing:
         tool_point = predicted_p_CP(np.asarray(seen.given.reference_x), X_frame)
         nearest = np.argsort(np.linalg.norm(p_CP - tool_point, axis=1))
@@ -119,13 +122,22 @@ def _admit_new(bank, params, criteria, seen: SeenFrame, kept: list, rejected: fr
             break
         i = int(ids[k])
         if ((on_body[k] or in_body_cell[k] or near_known[k]) and usable[k] and i not in present
-                and i not in rejected):
-            kept.append(admit(i, criteria, frame_time, p_CP[k], X_frame))
+                and i not in rejected and (seen.symmetric[k] or not symmetric_only)):
+            kept.append(admit(i, criteria, frame_time, p_CP[k], X_frame, bool(seen.symmetric[k])))
             present.add(i)
             admitted = True
             if math.isnan(round_start):
                 round_start = float(frame_time)
     return kept, admitted, round_start
+
+
+def _enough_symmetric(seen: SeenFrame, near_known: np.ndarray, rejected: frozenset) -> bool:
+    """Whether the frame has ``FIRST_CHOICE_POINTS`` centrally symmetric body points not rejected
+    (then only such points are admitted)."""
+    first = seen.symmetric & (seen.body | near_known)
+    if not first.any():
+        return False
+    return int(np.count_nonzero(first & ~np.isin(seen.ids, list(rejected)))) >= FIRST_CHOICE_POINTS
 
 
 def within_motion_gate(p_prev, X_prev, p, X, params: CandidateParams) -> bool:
@@ -158,12 +170,13 @@ def _archived(archive: list, params: CandidateParams) -> list:
     return sorted(useful, key=lambda c: -c.solution.num_samples)[: params.max_archived]
 
 
-def admit(feature_id, criteria, time, p_CP, X_WH) -> Candidate:
+def admit(feature_id, criteria, time, p_CP, X_WH, symmetric: bool = False) -> Candidate:
     """A new candidate, its identifier fed its first sample."""
     identifier = EyeToHandIdentifier(criteria=criteria)
     identifier.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
     return Candidate(feature_id, identifier.state, identifier.solve(refine_estimate=False), float(time),
-                     float(time), np.array(p_CP), np.array(X_WH), sampled_p_CP=np.array(p_CP))
+                     float(time), np.array(p_CP), np.array(X_WH), sampled_p_CP=np.array(p_CP),
+                     symmetric=symmetric)
 
 
 def identifier_of(c: Candidate, criteria, forgetting_factor) -> EyeToHandIdentifier:

@@ -168,7 +168,7 @@ def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tu
     limit = params.joint_consistency**2 * max(best.solution.expected_mse, ROUND_OFF_MSE)
     members = []
     for _ in range(3 if params.stitch_radius > 0 else 2):
-        members = [c for c in others if own_fit(c.statistic, R, p_WC)[1] <= limit]
+        members = first_choice([c for c in others if own_fit(c.statistic, R, p_WC)[1] <= limit], best)
         if not members:
             return best, [best.statistic]
         statistics = [c.statistic for c in [best] + members]
@@ -186,6 +186,23 @@ def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tu
     joint = EyeToHandEstimate(R, p_WC.copy(), P[0].copy(), x, mean_squared_error_of(best.statistic, x))
     solution = replace(best.solution, projected=joint, refined=joint)
     return replace(best, solution=solution), statistics
+
+
+# count: centrally symmetric points (a leader and the witness that confirms its camera,
+# ``confirm_with_witness``) that, where there are as many, keep the points kept for their view
+# shift alone out of the candidates (``admission``) and out of the joint refinement: a symmetric
+# point stays on the same surface point under any view, the others move by up to the gate's bound
+FIRST_CHOICE_POINTS = 2
+
+
+def first_choice(members: list, best: Candidate) -> list:
+    """The joint refinement's members without those kept for their view shift alone
+    (``Candidate.symmetric`` False) when, with the leader, ``FIRST_CHOICE_POINTS`` symmetric ones
+    join: a few points that stay put under any view outweigh many that move a little."""
+    symmetric = [c for c in members if c.symmetric]
+    if len(symmetric) + int(best.symmetric) >= FIRST_CHOICE_POINTS:
+        return symmetric
+    return members
 
 
 def inverse_variance_weights(mse: np.ndarray) -> np.ndarray:

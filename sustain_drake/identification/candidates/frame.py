@@ -51,6 +51,9 @@ class FrameInput:
     # tool points are kept; after any other reset the model (``reference_x``) is kept as the
     # previous camera that a slipped tool leaves in place
     reset_reason: int = NO_RESET
+    # per tracked feature, whether its point is centrally symmetric (``TrackedFeatures.symmetric``):
+    # such points are preferred to those kept for their view shift alone (None: no point is)
+    symmetric: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -66,6 +69,7 @@ class SeenFrame:
     in_body_cell: np.ndarray  # all False without ``use_body_cells``
     body: np.ndarray  # on_body | in_body_cell
     row: dict  # feature id -> its row
+    symmetric: np.ndarray  # usable and centrally symmetric (all False when not known)
 
     @property
     def time(self) -> float:
@@ -81,7 +85,10 @@ class SeenFrame:
         in_body_cell = (np.zeros_like(on_body) if given.in_body_cell is None or not params.use_body_cells
                         else np.asarray(given.in_body_cell, bool).ravel())
         row = {int(i): k for k, i in enumerate(ids)}
-        return cls(given, X_WH, ids, p_CP, usable, on_body, in_body_cell, on_body | in_body_cell, row)
+        symmetric = (np.zeros_like(usable) if given.symmetric is None or len(given.symmetric) != len(ids)
+                     else np.asarray(given.symmetric, bool).ravel() & usable)
+        return cls(given, X_WH, ids, p_CP, usable, on_body, in_body_cell, on_body | in_body_cell, row,
+                   symmetric)
 
 
 @dataclass(frozen=True)
