@@ -277,6 +277,33 @@ def test_a_witness_tells_a_sliding_track_from_a_change_of_the_body():
     assert np.all(errors[471:] > 1e-3)  # the slip does
 
 
+def test_when_a_slip_ends_the_observed_track_its_witness_takes_over_and_shows_the_slip():
+    # 9 leads and is observed, 4 is its witness. At frame 400 the tool slips: the track of 9 ends
+    # (its mark jumped) and 4, still tracked, moves with the tool. Without the witness taking over,
+    # the observation would go blind and the slip be hidden.
+    p4 = P_TOOL + [0.03, -0.02, 0.04]
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+    sigma = 1e-4
+    params = CandidateParams(observe_min_samples=50, confirm_with_witness=False)
+    bank, rng, errors = CandidateBank(), np.random.default_rng(3), []
+    for k in range(420):
+        X = hand_pose(k)
+        slip = np.array([0.02, 0.0, 0.0]) if k >= 400 else np.zeros(3)
+        ids, points = [4], [seen(X, p4 + slip, rng, noise=1e-3)]
+        if k < 400:
+            ids, points = [4, 9], points + [seen(X, P_TOOL, rng)]
+        frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(points),
+                           np.ones(len(ids), bool), np.ones(len(ids), bool), x_true, allowable_error=sigma)
+        bank = candidates.step(bank, params, CRITERIA, frame)
+        errors.append((bank.sample_count, bank.sample_error))
+        if k == 399:
+            assert bank.observed == 9 and bank.witness == 4
+    assert bank.observed == 4
+    counts, values = np.array(errors).T
+    after = values[401:][np.diff(counts)[400:] > 0]  # the samples after the slip
+    assert after.size >= 15 and np.all(after > sigma)
+
+
 def test_after_a_slip_the_previous_camera_is_kept_and_only_p_HP_is_new():
     x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
     slipped = P_TOOL + [0.0, 0.03, 0.04]

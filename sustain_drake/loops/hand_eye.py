@@ -61,8 +61,9 @@ class HandEyeConfig:
     # rad (max-norm) from the arm's posture that the postures asked for more motion keep to; 0: anywhere
     identifying_motion_reach: float = 0.1
     refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
-    # depth sigmas a 45 deg tilt may move a non-symmetric point on its face and keep it; 0: symmetric only
-    max_view_shift_sigmas: float = 1.0
+    # depth sigmas a 45 deg tilt may move a non-symmetric point on its face and keep it (a second
+    # choice: used where fewer than two symmetric points are); 0: symmetric points only
+    max_view_shift_sigmas: float = 0.0
     false_alarm_window: float = 2.0  # s; a detection with no disturbance this long before is a false alarm
     log_rate: float = 30.0  # samples per second of the logged signals (plots, metrics)
 
@@ -148,7 +149,7 @@ def hand_eye_parts(config: HandEyeConfig) -> HandEyeParts:
         keep_camera_min_samples=50,
     )  # fmt: skip
     # cornerSubPix with a 9 x 9 window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it),
-    # centrally symmetric points (and, with max_view_shift_sigmas, points fixed on their face), the
+    # centrally symmetric points first, then (max_view_shift_sigmas) points fixed on their face, the
     # depth on the face's fitted plane (docs/hand_eye.md, "The points")
     refinement = RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3,
                                   depth_plane=True, max_view_shift_sigmas=config.max_view_shift_sigmas)

@@ -290,8 +290,8 @@ def _choose_witness(bank, params, seen: SeenFrame, x, anchor) -> CandidateBank:
 
 def _reacquire(bank, params, seen: SeenFrame, x, anchor) -> CandidateBank:
     """A new observed point: a body feature where ``x`` puts the observed point (a new track of
-    the same point), else the consistent candidate nearest to it in H (with its own ``p_HP``),
-    else none."""
+    the same point), else the witness if still tracked, else the consistent candidate nearest to
+    it in H (with its own ``p_HP``), else none."""
     X_WH, ids, p_CP, usable = seen.X_WH, seen.ids, seen.p_CP, seen.usable
     near = np.flatnonzero(usable & seen.body)
     if near.size:
@@ -303,6 +303,13 @@ def _reacquire(bank, params, seen: SeenFrame, x, anchor) -> CandidateBank:
             if bank.observed == bank.witness:
                 bank = replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
             return bank
+    w = _gated_row(bank.witness, bank.witness_last, seen, params) if bank.witness >= 0 else None
+    if w is not None and usable[w]:
+        # The witness, chosen while it fitted the model, takes over whether or not it fits now: a
+        # change that ended the observed point's track (a slip moves a mark by centimetres in a
+        # tenth of a second) moved the witness too, and its error is the evidence.
+        return replace(bank, observed=bank.witness, observed_p_HP=bank.witness_p_HP,
+                       observed_last=bank.witness_last, witness=-1, witness_p_HP=None, witness_last=None)
     options = consistent(bank, params, seen, x, exclude=(bank.observed,), verified=True)
     # The consistent point nearest in H to the adopted tool point: the observation stays on the
     # tool (a chain of hand-overs must not drift onto the hand, which does not see the tool slip).
