@@ -46,11 +46,12 @@ class FeatureRefiner(LeafSystem):
         - tracked_features
 
     ``tracked_features`` out is the input with ``p_px``, ``p_CP``, ``valid`` and ``symmetric``
-    replaced (same ids and order, so a detector's body flags still match). The images must be the frame the features
-    come from: when ``image_time`` (connected) differs from the features' ``time``, every feature is
-    invalid for that evaluation (no point is better than a point from another frame). ``depth_noise``
-    is the depth camera's noise model (``DepthNoiseModel``, its default if None), which
-    ``params.max_view_shift_sigmas`` is relative to. No state: the output is a function of the inputs.
+    replaced (same ids and order, so a detector's body flags still match). The images must be the
+    frame the features come from: when ``image_time`` (connected) differs from the features'
+    ``time``, every feature is invalid for that evaluation (no point is better than a point from
+    another frame). ``depth_noise`` is the depth camera's noise model (``DepthNoiseModel``, its
+    default if None), which ``params.max_view_shift_sigmas`` is relative to. No state: the output
+    is a function of the inputs.
     """
 
     def __init__(self, camera_info: CameraInfo, params: RefinementParams | None = None,
