@@ -264,7 +264,7 @@ class CandidateIdentifiers(LeafSystem):
             depth_gap=self._depth_gap(context, features.time),
             scene_turn=self._turn.Eval(context) if self._turn.HasValue(context) else None,
             scene_still_since=still, reset_reason=reason,
-            symmetric=features.symmetric if len(features.symmetric) == len(features) else None,
+            symmetric=features.symmetric,  # a length that does not match counts as not known
         )
         new = candidates.step(self.bank(context), self._params, self._formulation.criteria, frame)
         state.get_mutable_abstract_state(self._bank).set_value(Shared(new))

@@ -134,10 +134,8 @@ def _admit_new(bank, params, criteria, seen: SeenFrame, kept: list, rejected: fr
 def _enough_symmetric(seen: SeenFrame, near_known: np.ndarray, rejected: frozenset) -> bool:
     """Whether the frame has ``FIRST_CHOICE_POINTS`` centrally symmetric body points not rejected
     (then only such points are admitted)."""
-    first = seen.symmetric & (seen.body | near_known)
-    if not first.any():
-        return False
-    return int(np.count_nonzero(first & ~np.isin(seen.ids, list(rejected)))) >= FIRST_CHOICE_POINTS
+    first = seen.symmetric & (seen.body | near_known) & ~np.isin(seen.ids, list(rejected))
+    return int(np.count_nonzero(first)) >= FIRST_CHOICE_POINTS
 
 
 def within_motion_gate(p_prev, X_prev, p, X, params: CandidateParams) -> bool:

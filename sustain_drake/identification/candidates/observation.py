@@ -209,7 +209,7 @@ def observe_primary(bank: CandidateBank, params: CandidateParams, seen: SeenFram
     bank = replace(bank, observed_last=(p_CP[k].copy(), X_WH))
     if bank.witness < 0 or bank.witness not in row:
         bank = _choose_witness(bank, params, seen, x, anchor)
-    w = _gated_row(bank.witness, bank.witness_last, seen, params) if bank.witness >= 0 else None
+    w = _witness_row(bank, seen, params)
     reported, failures, errors = error, 0, (error,)
     if w is not None and usable[w]:
         x_w = x.copy()
@@ -229,6 +229,11 @@ def observe_primary(bank: CandidateBank, params: CandidateParams, seen: SeenFram
                        observed_last=bank.witness_last, witness=-1, witness_p_HP=None,
                        witness_last=None, primary_failures=0)
     return bank
+
+
+def _witness_row(bank: CandidateBank, seen: SeenFrame, params):
+    """The witness's row if there is one, tracked and not jumped (``_gated_row``), else None."""
+    return _gated_row(bank.witness, bank.witness_last, seen, params) if bank.witness >= 0 else None
 
 
 def _gated_row(feature_id, last, seen: SeenFrame, params):
@@ -303,7 +308,7 @@ def _reacquire(bank, params, seen: SeenFrame, x, anchor) -> CandidateBank:
             if bank.observed == bank.witness:
                 bank = replace(bank, witness=-1, witness_p_HP=None, witness_last=None)
             return bank
-    w = _gated_row(bank.witness, bank.witness_last, seen, params) if bank.witness >= 0 else None
+    w = _witness_row(bank, seen, params)
     if w is not None and usable[w]:
         # The witness, chosen while it fitted the model, takes over whether or not it fits now: a
         # change that ended the observed point's track (a slip moves a mark by centimetres in a
