@@ -55,7 +55,7 @@ def log_bytes(simulator) -> int:
     8); the run moves them to disk every ``LOG_SPOOL_INTERVAL`` (``experiments.log_spool``)."""
     context, total = simulator.get_context(), 0
     for sink in log_sinks(simulator.get_system()):
-        log = sink.FindLog(sink.GetMyContextFromRoot(context))
+        log = sink.FindLog(context)  # FindLog takes the root context
         total += 8 * log.num_samples() * (log.get_input_size() + 1)
     return total
 

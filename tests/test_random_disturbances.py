@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,9 @@ from sustain_drake.station.scenario_files import load_scenario_string
 
 ROOT = Path(__file__).resolve().parents[1]
 SOAK = ROOT / "diagrams" / "soak.yaml"
+sys.path.insert(0, str(ROOT / "bench"))
+import bench_soak  # noqa: E402
+
 ON = RandomDisturbances(enabled=True, seed=5)
 HEAD, TOOL = (0.0, 0.1), (0.0, 0.0)
 
@@ -153,10 +157,14 @@ def test_the_adopted_camera_after_each_reconvergence():
 
 
 def test_the_soak_builds_and_lists_its_drawn_disturbances(tmp_path):
-    """A 0.1 s run of the soak's whole diagram: the station plays the drawn timeline and the metrics
-    list each of its disturbances (none happened yet)."""
+    """A 0.2 s run of the soak's whole diagram, with the soak bench's memory monitor sampling it
+    every 0.1 s: the station plays the drawn timeline, the metrics list each of its disturbances (none
+    happened yet), and the monitor reads the resident memory and the logs' samples."""
     s = load_scenario(SOAK)
-    simulate_scenario(s, tmp_path, duration=0.1, log_rate=10.0, replay=False)
+    monitor = bench_soak.MemoryMonitor(0.1, tmp_path / "memory.json")
+    simulate_scenario(s, tmp_path, duration=0.2, log_rate=10.0, replay=False, on_step=monitor)
+    assert len(monitor.samples) == 2 and all(m["rss_mb"] > 0 and m["logs_mb"] > 0 for m in monitor.samples)
+    assert json.loads((tmp_path / "memory.json").read_text())["samples"] == monitor.samples
     listed = json.loads((tmp_path / "metrics.json").read_text())["hand_eye"]["disturbances"]
     assert [(d["kind"], d["time_s"]) for d in listed] == [
         ("head_move" if isinstance(e, HeadMove) else "tool_slip", e.time) for e in timeline(s)]
