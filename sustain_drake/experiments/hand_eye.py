@@ -34,7 +34,7 @@ from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import best_p_HP_given_camera
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
-from sustain_drake.loops.hand_eye import HandEyeParts, add_hand_eye_loop, hand_eye_parts
+from sustain_drake.loops.hand_eye import HandEyeParts, add_hand_eye_loop, connect_wrench_watch, hand_eye_parts
 from sustain_drake.loops.inspection import add_estimate_overlay, add_inspection
 from sustain_drake.station import ScenarioError, camera_info
 from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of, timeline
@@ -63,6 +63,7 @@ class HandEyeHandle:
     loggers: dict
     camera_motion: CameraMotionDetector | None = None
     tool_boxes: tuple = ()  # the held tool's geometry in its frame T (``hand_eye_metrics.Box``)
+    wrench_watch: object | None = None  # the payload loop watching the held tool (``slip_from_wrench``)
 
 
 def build_loop(builder, station, scenario, parts: HandEyeParts | None = None):
@@ -95,6 +96,11 @@ def build_loop(builder, station, scenario, parts: HandEyeParts | None = None):
         builder.Connect(loop.motion_confirm(), station.GetInputPort("motion_confirm"))
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
+    if config.slip_from_wrench:  # the wrist wrench's payload identification watches the held tool
+        watch = connect_wrench_watch(builder, loop, num_joints=len(arm_of(scenario).joints))
+        builder.Connect(station.GetOutputPort("wrench"), watch.identifier.GetInputPort("wrench"))
+        builder.Connect(station.GetOutputPort("sensor_kinematics"), watch.identifier.GetInputPort("kinematics_K"))
+        builder.Connect(station.GetOutputPort("joint_velocities"), watch.gate.GetInputPort("joint_velocities"))
     return loop
 
 
@@ -116,7 +122,7 @@ def add_to_diagram(builder, station, scenario, meshcat, parts: HandEyeParts | No
         add_estimate_overlay(builder, meshcat, camera_info(scenario), add_inspection(builder, loop, None),
                              station.GetOutputPort("X_WH"), station.GetOutputPort("true_X_WC"))
     return HandEyeHandle(scenario, tracker, detector, candidates, machine, loggers, loop.camera_motion,
-                         tool_boxes(station))
+                         tool_boxes(station), loop.wrench_watch)
 
 
 def tool_boxes(station) -> tuple:
@@ -148,6 +154,10 @@ def _disturbances(scenario) -> list[dict]:
     return sorted(out, key=lambda d: d["time_s"])
 
 
+# Who saw a change, by its event's detail (any other detail: the observation rule).
+_CAUSES = {coordination.CAMERA_MOVED_DETAIL: "camera_motion", coordination.BODY_CHANGED_DETAIL: "wrench"}
+
+
 def _log(handle, diagram, context, name):
     log = handle.loggers[name].FindLog(context)
     return log.sample_times(), log.data().T
@@ -161,8 +171,7 @@ def evaluate(handle, diagram, context) -> dict:
     convergences = [e.time for e in events if e.kind == coordination.CONVERGED]
     detections = [e.time for e in events if e.kind == coordination.CHANGE_DETECTED]
     # Who saw each change: the observation rule (Eq. (2) errors) or the camera's own motion.
-    causes = {e.time: "camera_motion" if e.detail == coordination.CAMERA_MOVED_DETAIL else "observation"
-              for e in events if e.kind == coordination.CHANGE_DETECTED}
+    causes = {e.time: _CAUSES.get(e.detail, "observation") for e in events if e.kind == coordination.CHANGE_DETECTED}
     t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
     _, X_HT_log = _log(handle, diagram, context, "true_X_HT")
     _, p_HP_log = _log(handle, diagram, context, "true_p_HP")
@@ -261,7 +270,18 @@ def evaluate(handle, diagram, context) -> dict:
         "tool_point_in_use_at_end": m.tool_point_at(t_tool, tool, float(t_tool[-1])),
         "wrong_adoptions": wrong,
         "num_wrong_adoptions": len(wrong),
+        "wrench_watch_events": _watch_events(handle, context),
     }
+
+
+def _watch_events(handle, context) -> list[dict] | None:
+    """The payload loop's events (``slip_from_wrench``; None without it): when it identified the held
+    tool and when it saw the tool change."""
+    if handle.wrench_watch is None:
+        return None
+    machine = handle.wrench_watch.state_machine
+    return [{"time_s": e.time, "kind": e.kind, "detail": e.detail}
+            for e in machine.events(machine.GetMyContextFromRoot(context))]
 
 
 def _followed_points(handle, diagram, context) -> list[m.FollowedPoint]:

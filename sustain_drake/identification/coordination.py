@@ -27,6 +27,12 @@ half-identified model is as stale as an adopted one); while that camera is still
 identifier is kept reset (each tick bumps the reset count), since samples taken while the camera
 moves fit no camera. Without these inputs (None) the rule is the one above, unchanged.
 
+Beyond the paper (``body_changes``, e.g. the wrist wrench's payload identification): a count of the
+held body's changes that another sensor detected. A new one in OBSERVE is a change detection for a
+slip (the reason ``OBSERVATION_FAILED``: the camera is kept), so a slip is found while no tracked
+point shows it (the tool out of view, or every point on it lost); in IDENTIFY it is only counted, as
+no model is adopted yet to drop. Without it (None) the rule is unchanged.
+
 The state is a small flat vector (``CoordinationState``) so that a Drake system can hold it in its
 context; ``step`` is a pure function of it.
 
@@ -100,8 +106,8 @@ class CoordinationRule:
 
 # Layout of the state vector.
 (MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE,
- REFINEMENT, CAMERA_MOVES, CAMERA_MOVING, RESET_REASON) = range(13)
-STATE_SIZE = 13
+ REFINEMENT, CAMERA_MOVES, CAMERA_MOVING, RESET_REASON, BODY_CHANGES) = range(14)
+STATE_SIZE = 14
 
 # Why the identifier was last reset (the state's RESET_REASON; the state machine's reset_reason port).
 NO_RESET = 0  # not reset yet
@@ -141,6 +147,8 @@ class Event:
 
 
 CAMERA_MOVED_DETAIL = "the camera moved"  # the detail of a change detected from the camera's own motion
+# the detail of a change of the held body reported by another sensor (``body_changes``)
+BODY_CHANGED_DETAIL = "the held body changed (another sensor)"
 
 
 def step(
@@ -155,6 +163,7 @@ def step(
     refinement: int = 0,
     camera_moving: bool = False,
     camera_moves: int | None = None,
+    body_changes: int | None = None,
 ) -> tuple[np.ndarray, Event | None]:
     """One tick of the rule. Returns the new state (a copy) and the event it decided, if any.
 
@@ -175,6 +184,9 @@ def step(
             converged solution with a higher counter than the adopted one is a refinement of it.
         camera_moving, camera_moves: the camera-motion detector's ``[moving, moves]`` (None: no
             detector, the paper's rule alone): a count above the last one seen is a new camera move.
+        body_changes: how many changes of the held body another sensor has detected (None: none
+            reports them): a count above the last one seen, in OBSERVE, is a change detection with
+            the reason ``OBSERVATION_FAILED`` (a slip, the camera kept).
 
     Raises IdentificationError for an argument of the wrong type or value: ``state`` not a real
     vector of STATE_SIZE, ``rule`` not a CoordinationRule, ``time`` not finite, ``converged`` and
@@ -183,7 +195,7 @@ def step(
     """
     state, expected_mse, sample_error = _checked_step_arguments(
         state, rule, time, converged, expected_mse, sample_count, sample_error, num_samples, refinement,
-        camera_moving, camera_moves)  # fmt: skip
+        camera_moving, camera_moves, body_changes)  # fmt: skip
     new = state.copy()
     new_sample = sample_count != int(state[LAST_SAMPLE])
     new[LAST_SAMPLE] = sample_count
@@ -199,6 +211,11 @@ def step(
                 new[RESET_SAMPLE] = sample_count
                 return new, None
             new[CAMERA_MOVING] = 0.0
+    if body_changes is not None:
+        new[BODY_CHANGES] = body_changes
+        if body_changes > state[BODY_CHANGES] and int(state[MODE]) == OBSERVE:
+            return _detect_change(new, sample_count, OBSERVATION_FAILED), Event(time, CHANGE_DETECTED,
+                                                                                BODY_CHANGED_DETAIL)
     if int(state[MODE]) == IDENTIFY:
         stale = num_samples is not None and num_samples > sample_count - state[RESET_SAMPLE]
         if converged and math.isfinite(expected_mse) and not stale:
@@ -229,7 +246,7 @@ def step(
 
 
 def _checked_step_arguments(state, rule, time, converged, expected_mse, sample_count, sample_error,
-                            num_samples, refinement, camera_moving, camera_moves):  # fmt: skip
+                            num_samples, refinement, camera_moving, camera_moves, body_changes):  # fmt: skip
     """``step``'s arguments checked (IdentificationError naming the first bad one); returns the state
     as a float64 vector and the two errors as floats."""
     if not (type(state) is np.ndarray and state.dtype is F64 and state.shape == (STATE_SIZE,)):
@@ -244,8 +261,9 @@ def _checked_step_arguments(state, rule, time, converged, expected_mse, sample_c
         integer("num_samples", num_samples, 0)
     integer("refinement", refinement, 0)
     flag("camera_moving", camera_moving)
-    if camera_moves is not None:
-        integer("camera_moves", camera_moves, 0)
+    for name, count in (("camera_moves", camera_moves), ("body_changes", body_changes)):
+        if count is not None:
+            integer(name, count, 0)
     return state, expected_mse, sample_error
 
 

@@ -14,7 +14,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.sensors import CameraConfig, CameraInfo, ImageDepth32F, ImageRgba8U
 
 from sustain_drake.loops.body_detection import BodyDetectionConfig
-from sustain_drake.loops.hand_eye import HandEyeConfig, add_hand_eye_loop
+from sustain_drake.loops.hand_eye import HandEyeConfig, add_hand_eye_loop, connect_wrench_watch
 from sustain_drake.loops.inspection import add_inspection
 from sustain_drake.loops.payload import KinestheticConfig, add_payload_loop
 from sustain_drake.systems.coordination_outputs import AdoptedEstimates, InputsConnected, RequiredInput
@@ -272,7 +272,10 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
     observation (a ``change_detected`` event "... samples over the limit": the tool slipped,
     ``hand_eye_reset_reason`` 1) keeps it. ``p_HP_valid`` and ``payload_valid`` are 1 while their
     loop observes an adopted estimate (its mode 1). ``hand_eye_allowable_error`` is 0 until the first
-    convergence, then the last adoption's.
+    convergence, then the last adoption's. With both loops and ``hand_eye.slip_from_wrench`` (the
+    default), each payload change detection is a hand-eye change detection too (a slip: a
+    ``change_detected`` event "the held body changed (another sensor)", ``hand_eye_reset_reason``
+    1, the camera kept), so a slip is found while the camera sees no point on the tool.
 
     The motion interface (``systems.motion_generator.MotionGenerator`` answers it;
     docs/on_your_robot.md). Each request is edge-triggered by its ``request_id``: it is new when the
@@ -323,6 +326,8 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
         builder.Connect(X_WH, vision.candidates.GetInputPort("X_WH"))
     if payload is not None:
         _connect_payload(builder, a, payload, X_WK, inputs)
+        if vision is not None and a.hand_eye.slip_from_wrench:  # the wrench's change is a slip
+            connect_wrench_watch(builder, vision, payload)
     for name, ports in inputs.items():
         _export_input(builder, name, ports)
     _export_outputs(builder, vision, payload)

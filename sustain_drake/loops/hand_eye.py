@@ -13,6 +13,7 @@ import numpy as np
 from sustain_drake.identification.candidates import CandidateParams
 from sustain_drake.loops.body_detection import BodyDetectionConfig, add_body_detection
 from sustain_drake.loops.identify_observe import CoordinationConfig, connect_identify_observe
+from sustain_drake.loops.payload import KinestheticConfig, PayloadLoop, add_payload_loop
 from sustain_drake.loops.pixel_scale import RAD_PER_PX_MEASURED, pixel_scale, scaled
 from sustain_drake.perception.camera_motion import CameraMotionParams
 from sustain_drake.perception.point_refinement import RefinementParams
@@ -64,6 +65,9 @@ class HandEyeConfig:
     # depth sigmas a 45 deg tilt may move a non-symmetric point on its face and keep it (a second
     # choice: used where fewer than two symmetric points are); 0: symmetric points only
     max_view_shift_sigmas: float = 0.0
+    # the wrist wrench's payload identification (dynamic mode) watches the held tool: its change
+    # detection is a slip, found while no tracked point shows it (needs a wrist force/torque sensor)
+    slip_from_wrench: bool = True
     false_alarm_window: float = 2.0  # s; a detection with no disturbance this long before is a false alarm
     log_rate: float = 30.0  # samples per second of the logged signals (plots, metrics)
 
@@ -166,6 +170,9 @@ class HandEyeLoop:
     refiner: FeatureRefiner | None = None
     camera_motion: CameraMotionDetector | None = None
     identifying_motion: IdentifyingMotion | None = None
+    # the payload loop watching the held tool (``slip_from_wrench``), added by the caller that has
+    # the wrench (``connect_wrench_watch``)
+    wrench_watch: PayloadLoop | None = None
 
     def image_inputs(self, name: str) -> list:
         """The input ports that take the camera's ``name`` (color_image, depth_image, image_time)."""
@@ -278,3 +285,19 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         # Points converged whose views do not pin the camera's rotation: far postures now.
         builder.Connect(candidates.GetOutputPort("more_motion"), motion.GetInputPort("more_motion"))
     return HandEyeLoop(tracker, detector, candidates, machine, refiner, camera, motion)
+
+
+def connect_wrench_watch(builder, loop: HandEyeLoop, payload: PayloadLoop | None = None,
+                         num_joints: int | None = None) -> PayloadLoop:
+    """``slip_from_wrench``: the payload loop ``payload`` (or, if None, a new one in the dynamic mode
+    with ``KinestheticConfig``'s defaults, for ``num_joints`` joints) watches the held tool; each of
+    its change detections (its state machine's ``reset`` count) is a slip for ``loop``'s state
+    machine (``body_changes``: the camera is kept, the tool point identified again). Left for the
+    caller with a new loop: its identifier's ``wrench`` and ``kinematics_K`` and its gate's
+    ``joint_velocities``; its ``pause`` is not used (the hand-eye loop pauses the arm). Returns the
+    payload loop, also kept as ``loop.wrench_watch``."""
+    if payload is None:
+        payload = add_payload_loop(builder, num_joints, KinestheticConfig(enabled=True, mode="dynamic"))
+    builder.Connect(payload.state_machine.GetOutputPort("reset"), loop.state_machine.GetInputPort("body_changes"))
+    loop.wrench_watch = payload
+    return payload

@@ -20,6 +20,7 @@ class CoordinationStateMachine(LeafSystem):
         - solution
         - observation
         - camera_motion (optional)
+        - body_changes (optional)
         output_ports:
         - mode
         - adopted_x
@@ -37,7 +38,10 @@ class CoordinationStateMachine(LeafSystem):
     ``CameraMotionDetector``; beyond the paper): a new camera move is a change detection, the
     identifier is kept reset while the camera moves (``coordination.step``), and the adopted model
     is dropped (a moved camera's model is no longer a model of anything); unconnected, the paper's
-    rule alone.
+    rule alone. ``body_changes`` (optional, 1: a count of the held body's changes detected by another
+    sensor; connect a payload loop's state machine's ``reset``, which counts the wrist wrench's change
+    detections; beyond the paper): a new one in OBSERVE is a change detection for a slip, the camera
+    kept (``coordination.step``); unconnected, none.
 
     Outputs: ``mode`` (1: 0 IDENTIFY, 1 OBSERVE); ``adopted_x`` (N, the adopted estimate; zeros
     while there is none: before the first convergence and from a camera move to the next
@@ -65,6 +69,7 @@ class CoordinationStateMachine(LeafSystem):
         self._solution_in = self.DeclareAbstractInputPort("solution", AbstractValue.Make(object()))
         self._observation = self.DeclareVectorInputPort("observation", 2)
         self._camera_motion = self.DeclareVectorInputPort("camera_motion", 2)
+        self._body_changes = self.DeclareVectorInputPort("body_changes", 1)
         self._state = self.DeclareDiscreteState(coordination.initial_state())
         self._adopted_x = self.DeclareDiscreteState(np.zeros(num_unknowns))
         self._adopted_x_size = int(num_unknowns)
@@ -116,10 +121,12 @@ class CoordinationStateMachine(LeafSystem):
     def _update(self, context, state) -> None:
         solution = self._solution_in.Eval(context)
         sample_count, sample_error = self._observation.Eval(context)
-        camera = {}
+        camera = {}  # the optional inputs' keyword arguments
         if self._camera_motion.HasValue(context):
             moving, moves = self._camera_motion.Eval(context)
             camera = {"camera_moving": bool(moving > 0.5), "camera_moves": int(moves)}
+        if self._body_changes.HasValue(context):
+            camera["body_changes"] = int(self._body_changes.Eval(context)[0])
         new, event = coordination.step(
             self._vector(context), self._rule, context.get_time(), solution.verdict.converged,
             solution.expected_mse, int(sample_count), float(sample_error), int(solution.num_samples),
