@@ -281,3 +281,66 @@ def test_a_camera_move_clears_the_adopted_model():
     assert sm.GetOutputPort("adopted_solution").Eval(context) is None
     simulator.AdvanceTo(12.0)
     assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)  # re-identified
+
+
+def test_a_body_change_from_another_sensor_is_a_slip_in_observe_only():
+    """``body_changes``: a count above the last one seen, in OBSERVE, is a change detection for a
+    slip (the camera kept: reason OBSERVATION_FAILED) though every sample is within the limit; in
+    IDENTIFY it is only counted; the same count again is nothing."""
+    ok = 1e-8  # far within sigma = 1e-4
+    state, event = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, ok, body_changes=0)
+    state, event = coordination.step(state, RULE, 0.1, False, 1.0, 2, ok, body_changes=1)
+    assert event is None and state[coordination.MODE] == coordination.IDENTIFY  # counted only
+    assert state[coordination.BODY_CHANGES] == 1 and state[coordination.RESET_COUNT] == 0
+    state, event = coordination.step(state, RULE, 0.2, True, 1e-6, 3, ok, body_changes=1)
+    assert event.kind == coordination.CONVERGED
+    for k in range(5):  # observing, the same count: nothing
+        state, event = coordination.step(state, RULE, 0.3 + 0.1 * k, True, 1e-6, 4 + k, ok, body_changes=1)
+        assert event is None and state[coordination.MODE] == coordination.OBSERVE
+    state, event = coordination.step(state, RULE, 1.0, True, 1e-6, 9, ok, body_changes=2)
+    assert event.kind == coordination.CHANGE_DETECTED
+    assert event.detail == coordination.BODY_CHANGED_DETAIL and event.time == 1.0
+    assert state[coordination.MODE] == coordination.IDENTIFY and state[coordination.RESET_COUNT] == 1
+    assert state[coordination.RESET_REASON] == coordination.OBSERVATION_FAILED
+    # Without the input the rule is the paper's: the same samples raise nothing.
+    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, True, 1e-6, 1, ok)
+    state, event = coordination.step(state, RULE, 0.1, True, 1e-6, 2, ok)
+    assert event is None and state[coordination.MODE] == coordination.OBSERVE
+    with pytest.raises(coordination.IdentificationError, match="body_changes"):
+        coordination.step(state, RULE, 0.2, True, 1e-6, 3, ok, body_changes=-1)
+
+
+class ScriptedBodyChanges(LeafSystem):
+    """A count of the held body's changes: one at ``t0``."""
+
+    def __init__(self, t0):
+        super().__init__()
+        self.DeclareVectorOutputPort("body_changes", 1, lambda c, o: o.SetFromVector(
+            [float(c.get_time() >= t0)]))  # fmt: skip
+
+
+def test_the_state_machine_takes_the_body_changes_input():
+    """A point on a babbling hand that never changes, and a body change reported at 6 s: the state
+    machine detects a change then, keeps the adopted model (the previous camera for a slip), and
+    identifies again."""
+    truth, _, _, _ = build(t_slip=np.inf)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ScriptedHandPoint(truth, truth.p_HP, np.inf, 0.1))
+    ident = builder.AddSystem(SustainableIdentifierSystem(EyeToHandFormulation(), period=0.1))
+    sm = builder.AddSystem(CoordinationStateMachine(16, period=0.1))
+    changes = builder.AddSystem(ScriptedBodyChanges(6.0))
+    builder.Connect(source.GetOutputPort("p_CP"), ident.GetInputPort("p_CP"))
+    builder.Connect(source.GetOutputPort("X_WH"), ident.GetInputPort("X_WH"))
+    builder.Connect(changes.get_output_port(), sm.GetInputPort("body_changes"))
+    connect_identify_observe(builder, ident, sm)
+    simulator = Simulator(builder.Build())
+    context = sm.GetMyContextFromRoot(simulator.get_context())
+    simulator.AdvanceTo(6.5)
+    events = sm.events(context)
+    assert [e.kind for e in events] == [coordination.CONVERGED, coordination.CHANGE_DETECTED]
+    assert events[0].time < 6.0 and events[1].time == pytest.approx(6.0)
+    assert events[1].detail == coordination.BODY_CHANGED_DETAIL
+    assert sm.GetOutputPort("reset_reason").Eval(context)[0] == coordination.OBSERVATION_FAILED
+    assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)  # kept: the camera did not move
+    simulator.AdvanceTo(14.0)
+    assert [e.kind for e in sm.events(context)][2:] == [coordination.CONVERGED]
