@@ -20,7 +20,7 @@ from sustain_drake.experiments import hand_eye
 from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import own_fit
 from sustain_drake.identification.rotation import rotation_angle
-from sustain_drake.loops.hand_eye import hand_eye_parts
+from sustain_drake.loops.hand_eye import connect_wrench_watch, hand_eye_parts
 from sustain_drake.loops.identify_observe import connect_identify_observe
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.station import build_station, load_scenario
@@ -38,10 +38,12 @@ PERIOD = 1.0 / 30.0
 class ScriptedToolPoint(LeafSystem):
     """One tracked body feature at the true tool point, as the tracker and detector would report
     it: ``p_CP`` from the true camera pose and hand pose with 1.5 mm noise per axis (test only:
-    ground truth stands in for perception)."""
+    ground truth stands in for perception). Within ``blind`` (``[t0, t1)`` s) the point is not
+    measured, and after it the track is a new one (id 2), as when every track ended in a gap."""
 
-    def __init__(self):
+    def __init__(self, blind=(np.inf, np.inf)):
         super().__init__()
+        self._blind = blind
         self._X_WH = self.DeclareAbstractInputPort("X_WH", AbstractValue.Make(RigidTransform()))
         self._X_WC = self.DeclareAbstractInputPort("true_X_WC", AbstractValue.Make(RigidTransform()))
         self._p_HP = self.DeclareVectorInputPort("true_p_HP", 3)
@@ -55,19 +57,26 @@ class ScriptedToolPoint(LeafSystem):
         rng = np.random.default_rng([11, int(round(t / PERIOD))])
         p_W = self._X_WH.Eval(context) @ self._p_HP.Eval(context)
         p_C = self._X_WC.Eval(context).inverse() @ p_W + rng.normal(0.0, 1.5e-3, 3)
-        output.set_value(TrackedFeatures(ids=np.array([1]), p_px=np.zeros((1, 2)), flow_px=np.zeros((1, 2)),
-                                         p_CP=p_C.reshape(1, 3), valid=np.array([True]),
+        output.set_value(TrackedFeatures(ids=self._ids(t), p_px=np.zeros((1, 2)), flow_px=np.zeros((1, 2)),
+                                         p_CP=p_C.reshape(1, 3),
+                                         valid=np.array([not self._blind[0] <= t < self._blind[1]]),
                                          cell=np.array([0]), time=t))
 
+    def _ids(self, t):
+        return np.array([1 if t < self._blind[1] else 2])
+
     def _calc_flags(self, context, output):
-        output.set_value(FeatureBodyFlags(ids=np.array([1]), on_body=np.array([True]),
+        output.set_value(FeatureBodyFlags(ids=self._ids(context.get_time()), on_body=np.array([True]),
                                           in_body_cell=np.array([True]), actuator=np.array([-1])))
 
 
-def add_scripted_loop(builder, disturbances: list) -> SimpleNamespace:
+def add_scripted_loop(builder, disturbances: list, blind=(np.inf, np.inf),
+                      wrench_watch: bool = False) -> SimpleNamespace:  # fmt: skip
     """The hand-eye world without rendering, the person or its disturbances (``disturbances``
-    instead), its candidates fed one ``ScriptedToolPoint``, the identify/observe state machine
-    wired: ``(scenario, station, source, candidates, machine)``."""
+    instead), its candidates fed one ``ScriptedToolPoint`` (blind within ``blind``), the
+    identify/observe state machine wired, and with ``wrench_watch`` the payload loop watching the
+    held tool from the station's wrench (``slip_from_wrench``): ``(scenario, station, source,
+    candidates, machine)``."""
     scenario = load_scenario(ROOT / "diagrams" / "hand_eye.yaml")
     scenario.camera.rgb = scenario.camera.depth = False
     scenario.distractor.enabled = False
@@ -77,7 +86,7 @@ def add_scripted_loop(builder, disturbances: list) -> SimpleNamespace:
     # the paper's allowable error factor: the scripted noise is Gaussian
     config = dataclasses.replace(parts.coordination, allowable_error_factor=100.0, min_gap_ratio=10.0)
     station = builder.AddSystem(build_station(scenario))
-    source = builder.AddSystem(ScriptedToolPoint())
+    source = builder.AddSystem(ScriptedToolPoint(blind))
     for name in ("X_WH", "true_X_WC", "true_p_HP"):
         builder.Connect(station.GetOutputPort(name), source.GetInputPort(name))
     candidates = builder.AddSystem(CandidateIdentifiers(
@@ -89,6 +98,12 @@ def add_scripted_loop(builder, disturbances: list) -> SimpleNamespace:
     connect_identify_observe(builder, candidates, machine)
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
+    if wrench_watch:
+        loop = SimpleNamespace(state_machine=machine, wrench_watch=None)
+        watch = connect_wrench_watch(builder, loop, num_joints=station.GetOutputPort("joint_positions").size())
+        builder.Connect(station.GetOutputPort("wrench"), watch.identifier.GetInputPort("wrench"))
+        builder.Connect(station.GetOutputPort("sensor_kinematics"), watch.identifier.GetInputPort("kinematics_K"))
+        builder.Connect(station.GetOutputPort("joint_velocities"), watch.gate.GetInputPort("joint_velocities"))
     return SimpleNamespace(scenario=scenario, station=station, source=source, candidates=candidates,
                            machine=machine)
 
@@ -126,6 +141,30 @@ def test_scripted_tool_point_on_the_station_detects_a_slip_and_a_head_move():
     est = machine.GetOutputPort("adopted_solution").Eval(machine.GetMyContextFromRoot(context)).estimate
     assert np.linalg.norm(est.p_WC - X_WC.translation()) < 0.03
     assert np.linalg.norm(est.p_HP - p_HP) < 0.01
+
+
+def test_a_slip_while_the_tool_is_unseen_is_found_by_the_wrist_wrench():
+    """Issue 27, item 5: the tool point is unseen from 0.5 s before a slip to 3 s after it, and
+    comes back as a new track, which the kept camera explains with its own ``p_HP``: the tracked
+    point alone shows no violation. The payload loop watching the wrench detects the slip within
+    1 s; the camera is kept and the tool point identified again, where the slipped tool puts it."""
+    builder = DiagramBuilder()
+    t_slip = 22.0  # after the payload loop's first identification (about 17 s on this motion)
+    loop = add_scripted_loop(builder, [ToolSlip(time=t_slip, slide=0.04, pivot=0.35, duration=0.1)],
+                             blind=(t_slip - 0.5, t_slip + 3.0), wrench_watch=True)
+    simulator = Simulator(builder.Build())
+    context = simulator.get_context()
+    simulator.AdvanceTo(t_slip + 8.0)
+    events = loop.machine.events(loop.machine.GetMyContextFromRoot(context))
+    assert [e.kind for e in events] == [coordination.CONVERGED, coordination.CHANGE_DETECTED,
+                                        coordination.CONVERGED]  # fmt: skip
+    assert t_slip < events[1].time <= t_slip + 1.0
+    assert events[1].detail == coordination.BODY_CHANGED_DETAIL
+    adoptions = loop.candidates.bank(loop.candidates.GetMyContextFromRoot(context)).adoptions
+    assert [a.kind for a in adoptions] == ["identified", "previous camera"]
+    p_HP = loop.station.GetOutputPort("true_p_HP").Eval(loop.station.GetMyContextFromRoot(context))
+    est = loop.machine.GetOutputPort("adopted_solution").Eval(loop.machine.GetMyContextFromRoot(context)).estimate
+    assert np.linalg.norm(est.p_HP - p_HP) < 0.01  # the slip moved it 4 cm
 
 
 def test_images_to_first_convergence():

@@ -122,6 +122,7 @@ BAD = [
     ("hand_eye: {enabled: true}\nbody_detection: {enabled: true}\ncamera: {label: true}\n",
      "body_detection.confirm"),
     ("kinesthetic: {enabled: true}\n", "tool.model"),
+    ("hand_eye: {enabled: true}\nwrench_sensor: {compensate_gripper: true}\n", "hand_eye.slip_from_wrench"),
     ("tool: {model: none}\ndisturbances: [!ToolSlip {time: 1}]\n", "disturbances[0]"),
     # the file itself: duplicate and unknown keys, types, tags
     ("duration: 1\nduration: 2\n", "duration"),

@@ -258,6 +258,32 @@ def test_the_camera_motion_detector_is_optional_and_exported():
     assert camera.GetInputPort("actuator_positions").size() == 6
 
 
+def _body_changes_source(diagram) -> str | None:
+    """The system and output port feeding the hand-eye state machine's ``body_changes`` (None:
+    unconnected)."""
+    machine = diagram.GetSubsystemByName("coordination_state_machine")
+    index = machine.GetInputPort("body_changes").get_index()
+    for (system, input_index), (source, output_index) in diagram.connection_map().items():
+        if system is machine and input_index == index:
+            return f"{source.get_name()}.{source.get_output_port(output_index).get_name()}"
+    return None
+
+
+def test_a_payload_change_is_a_hand_eye_slip_with_both_loops():
+    """``hand_eye.slip_from_wrench`` (the default): with both loops, the payload loop's change
+    detections (its state machine's ``reset`` count) feed the hand-eye state machine's
+    ``body_changes``; off, or without the payload loop, nothing does."""
+    info = CameraInfo(160, 120, 1.0)
+    config = HandEyeConfig(identifying_motion_interval=0.0)
+    assert config.slip_from_wrench
+    both = make_sustainable_coordination(info, 6, hand_eye=config)
+    assert _body_changes_source(both) == "payload_coordination.reset"
+    off = make_sustainable_coordination(info, 6, hand_eye=replace(config, slip_from_wrench=False))
+    assert _body_changes_source(off) is None
+    vision = make_sustainable_coordination(info, 6, hand_eye=config, loops=Loops(payload=False))
+    assert _body_changes_source(vision) is None
+
+
 def test_the_identifying_motion_takes_its_ranges_from_the_plant_limits():
     """With a plant and no ``joint_ranges``, the identifying motion (on by default) asks for
     postures within the plant's position limits narrowed by RANGE_MARGIN at each end."""

@@ -8,6 +8,8 @@ The loop, from images only (no ground truth inside it)::
         (camera_motion.enabled) tracked_features + feature_on_body + joints -> CameraMotionDetector
             -> state machine camera_motion (a camera move is a change detection), and its
             feature_on_body (the static scene's features cleared) -> CandidateIdentifiers
+        (slip_from_wrench) station wrench + sensor_kinematics -> payload loop (dynamic mode) reset
+            -> state machine body_changes (the payload's change detection is a slip)
 
 ``finish`` evaluates against the station's ground truth (``true_X_WC``, ``true_p_HP``,
 ``true_X_HT``, logged beside the loop): the time of each convergence and each detection, the error
@@ -170,7 +172,7 @@ def evaluate(handle, diagram, context) -> dict:
     bank = handle.candidates.bank(handle.candidates.GetMyContextFromRoot(context))
     convergences = [e.time for e in events if e.kind == coordination.CONVERGED]
     detections = [e.time for e in events if e.kind == coordination.CHANGE_DETECTED]
-    # Who saw each change: the observation rule (Eq. (2) errors) or the camera's own motion.
+    # Who saw each change: the observation rule (Eq. (2) errors), the camera's own motion or the wrench.
     causes = {e.time: _CAUSES.get(e.detail, "observation") for e in events if e.kind == coordination.CHANGE_DETECTED}
     t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
     _, X_HT_log = _log(handle, diagram, context, "true_X_HT")

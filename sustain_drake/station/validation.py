@@ -364,10 +364,15 @@ def _validate(s: Scenario) -> None:
     _check_timeline(s)
     _check(not s.kinesthetic.enabled or s.tool.model == "box", "kinesthetic: needs tool.model: box "
            "(the tool with a collision shape to locate touches on)")
-    dynamic = s.kinesthetic.enabled and s.kinesthetic.mode == "dynamic"
-    _check(not (dynamic and s.wrench_sensor.compensate_gripper), "kinesthetic.mode: dynamic needs "
-           "wrench_sensor.compensate_gripper: false (a static compensation leaves the gripper's inertial "
+    # A static compensation leaves the gripper's inertial wrench in the reading; the dynamic payload
+    # identification (the kinesthetic loop's dynamic mode, the hand-eye loop's wrench watch) models
+    # everything outboard of the sensor.
+    why = ("wrench_sensor.compensate_gripper: false (a static compensation leaves the gripper's inertial "
            "wrench in the reading; the dynamic mode identifies everything outboard)")
+    dynamic = s.kinesthetic.enabled and s.kinesthetic.mode == "dynamic"
+    _check(not (dynamic and s.wrench_sensor.compensate_gripper), f"kinesthetic.mode: dynamic needs {why}")
+    watch = s.hand_eye.enabled and s.hand_eye.slip_from_wrench
+    _check(not (watch and s.wrench_sensor.compensate_gripper), f"hand_eye.slip_from_wrench needs {why}")
     _check_math_layer(s)
 
 
