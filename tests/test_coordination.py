@@ -288,7 +288,7 @@ def test_a_body_change_from_another_sensor_is_a_slip_in_observe_only():
     slip (the camera kept: reason OBSERVATION_FAILED) though every sample is within the limit; in
     IDENTIFY it is only counted; the same count again is nothing."""
     ok = 1e-8  # far within sigma = 1e-4
-    state, event = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, ok, body_changes=0)
+    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, ok, body_changes=0)
     state, event = coordination.step(state, RULE, 0.1, False, 1.0, 2, ok, body_changes=1)
     assert event is None and state[coordination.MODE] == coordination.IDENTIFY  # counted only
     assert state[coordination.BODY_CHANGES] == 1 and state[coordination.RESET_COUNT] == 0

@@ -99,11 +99,10 @@ def add_scripted_loop(builder, disturbances: list, blind=(np.inf, np.inf),
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     if wrench_watch:
-        loop = SimpleNamespace(state_machine=machine, wrench_watch=None)
-        watch = connect_wrench_watch(builder, loop, num_joints=station.GetOutputPort("joint_positions").size())
-        builder.Connect(station.GetOutputPort("wrench"), watch.identifier.GetInputPort("wrench"))
-        builder.Connect(station.GetOutputPort("sensor_kinematics"), watch.identifier.GetInputPort("kinematics_K"))
-        builder.Connect(station.GetOutputPort("joint_velocities"), watch.gate.GetInputPort("joint_velocities"))
+        loop = SimpleNamespace(state_machine=machine, wrench_watch=None)  # what connect_wrench_watch uses
+        n = station.GetOutputPort("joint_positions").size()
+        watch = connect_wrench_watch(builder, loop, num_joints=n)
+        hand_eye.connect_station_wrench(builder, station, watch)
     return SimpleNamespace(scenario=scenario, station=station, source=source, candidates=candidates,
                            machine=machine)
 
@@ -163,7 +162,8 @@ def test_a_slip_while_the_tool_is_unseen_is_found_by_the_wrist_wrench():
     adoptions = loop.candidates.bank(loop.candidates.GetMyContextFromRoot(context)).adoptions
     assert [a.kind for a in adoptions] == ["identified", "previous camera"]
     p_HP = loop.station.GetOutputPort("true_p_HP").Eval(loop.station.GetMyContextFromRoot(context))
-    est = loop.machine.GetOutputPort("adopted_solution").Eval(loop.machine.GetMyContextFromRoot(context)).estimate
+    machine_context = loop.machine.GetMyContextFromRoot(context)
+    est = loop.machine.GetOutputPort("adopted_solution").Eval(machine_context).estimate
     assert np.linalg.norm(est.p_HP - p_HP) < 0.01  # the slip moved it 4 cm
 
 

@@ -99,11 +99,18 @@ def build_loop(builder, station, scenario, parts: HandEyeParts | None = None):
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     if config.slip_from_wrench:  # the wrist wrench's payload identification watches the held tool
-        watch = connect_wrench_watch(builder, loop, num_joints=len(arm_of(scenario).joints))
-        builder.Connect(station.GetOutputPort("wrench"), watch.identifier.GetInputPort("wrench"))
-        builder.Connect(station.GetOutputPort("sensor_kinematics"), watch.identifier.GetInputPort("kinematics_K"))
-        builder.Connect(station.GetOutputPort("joint_velocities"), watch.gate.GetInputPort("joint_velocities"))
+        connect_station_wrench(builder, station, connect_wrench_watch(builder, loop, num_joints=len(
+            arm_of(scenario).joints)))
     return loop
+
+
+def connect_station_wrench(builder, station, payload) -> None:
+    """The station's wrist wrench, the sensor frame's kinematics and the joint velocities into the
+    dynamic-mode payload loop ``payload`` (a ``loops.payload.PayloadLoop``)."""
+    builder.Connect(station.GetOutputPort("wrench"), payload.identifier.GetInputPort("wrench"))
+    identifier, gate = payload.identifier, payload.gate
+    builder.Connect(station.GetOutputPort("sensor_kinematics"), identifier.GetInputPort("kinematics_K"))
+    builder.Connect(station.GetOutputPort("joint_velocities"), gate.GetInputPort("joint_velocities"))
 
 
 def add_to_diagram(builder, station, scenario, meshcat, parts: HandEyeParts | None = None) -> HandEyeHandle:
@@ -173,7 +180,8 @@ def evaluate(handle, diagram, context) -> dict:
     convergences = [e.time for e in events if e.kind == coordination.CONVERGED]
     detections = [e.time for e in events if e.kind == coordination.CHANGE_DETECTED]
     # Who saw each change: the observation rule (Eq. (2) errors), the camera's own motion or the wrench.
-    causes = {e.time: _CAUSES.get(e.detail, "observation") for e in events if e.kind == coordination.CHANGE_DETECTED}
+    causes = {e.time: _CAUSES.get(e.detail, "observation")
+              for e in events if e.kind == coordination.CHANGE_DETECTED}
     t_pose, X_WC_log = _log(handle, diagram, context, "true_X_WC")
     _, X_HT_log = _log(handle, diagram, context, "true_X_HT")
     _, p_HP_log = _log(handle, diagram, context, "true_p_HP")

@@ -287,17 +287,24 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     return HandEyeLoop(tracker, detector, candidates, machine, refiner, camera, motion)
 
 
+def wrench_watch_config() -> KinestheticConfig:
+    """The payload loop that watches the held tool for ``slip_from_wrench``: the dynamic mode (every
+    sample counts, moving or not: the babbling need not rest) with ``KinestheticConfig``'s defaults."""
+    return KinestheticConfig(enabled=True, mode="dynamic")
+
+
 def connect_wrench_watch(builder, loop: HandEyeLoop, payload: PayloadLoop | None = None,
                          num_joints: int | None = None) -> PayloadLoop:
-    """``slip_from_wrench``: the payload loop ``payload`` (or, if None, a new one in the dynamic mode
-    with ``KinestheticConfig``'s defaults, for ``num_joints`` joints) watches the held tool; each of
+    """``slip_from_wrench``: the payload loop ``payload`` (or, if None, a new one of
+    ``wrench_watch_config``, for ``num_joints`` joints) watches the held tool; each of
     its change detections (its state machine's ``reset`` count) is a slip for ``loop``'s state
     machine (``body_changes``: the camera is kept, the tool point identified again). Left for the
     caller with a new loop: its identifier's ``wrench`` and ``kinematics_K`` and its gate's
     ``joint_velocities``; its ``pause`` is not used (the hand-eye loop pauses the arm). Returns the
     payload loop, also kept as ``loop.wrench_watch``."""
     if payload is None:
-        payload = add_payload_loop(builder, num_joints, KinestheticConfig(enabled=True, mode="dynamic"))
-    builder.Connect(payload.state_machine.GetOutputPort("reset"), loop.state_machine.GetInputPort("body_changes"))
+        payload = add_payload_loop(builder, num_joints, wrench_watch_config())
+    changes = payload.state_machine.GetOutputPort("reset")  # counts the payload's change detections
+    builder.Connect(changes, loop.state_machine.GetInputPort("body_changes"))
     loop.wrench_watch = payload
     return payload
