@@ -283,31 +283,64 @@ def test_a_camera_move_clears_the_adopted_model():
     assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)  # re-identified
 
 
-def test_a_body_change_from_another_sensor_is_a_slip_in_observe_only():
-    """``body_changes``: a count above the last one seen, in OBSERVE, is a change detection for a
-    slip (the camera kept: reason OBSERVATION_FAILED) though every sample is within the limit; in
-    IDENTIFY it is only counted; the same count again is nothing."""
-    ok = 1e-8  # far within sigma = 1e-4
-    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, ok, body_changes=0)
-    state, event = coordination.step(state, RULE, 0.1, False, 1.0, 2, ok, body_changes=1)
-    assert event is None and state[coordination.MODE] == coordination.IDENTIFY  # counted only
-    assert state[coordination.BODY_CHANGES] == 1 and state[coordination.RESET_COUNT] == 0
-    state, event = coordination.step(state, RULE, 0.2, True, 1e-6, 3, ok, body_changes=1)
+def _observing(body_changes=0):
+    """A state in OBSERVE (sigma 1e-4) that has seen ``body_changes``, and the next sample count."""
+    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, 0.0,
+                                 body_changes=body_changes)  # fmt: skip
+    state, event = coordination.step(state, RULE, 0.1, True, 1e-6, 2, 0.0, body_changes=body_changes)
     assert event.kind == coordination.CONVERGED
-    for k in range(5):  # observing, the same count: nothing
-        state, event = coordination.step(state, RULE, 0.3 + 0.1 * k, True, 1e-6, 4 + k, ok, body_changes=1)
+    return state, 3
+
+
+def test_a_body_change_reported_while_identifying_is_only_counted():
+    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, 0.0, body_changes=0)
+    state, event = coordination.step(state, RULE, 0.1, False, 1.0, 2, 0.0, body_changes=1)
+    assert event is None and state[coordination.MODE] == coordination.IDENTIFY
+    assert state[coordination.BODY_CHANGES] == 1 and state[coordination.BODY_PENDING] == -1
+    state, event = coordination.step(state, RULE, 0.2, True, 1e-6, 3, 0.0, body_changes=1)
+    assert event.kind == coordination.CONVERGED
+    for k in range(30):  # observing, the same count: nothing
+        state, event = coordination.step(state, RULE, 0.3 + 0.1 * k, True, 1e-6, 4 + k, 1e-8, body_changes=1)
         assert event is None and state[coordination.MODE] == coordination.OBSERVE
-    state, event = coordination.step(state, RULE, 1.0, True, 1e-6, 9, ok, body_changes=2)
-    assert event.kind == coordination.CHANGE_DETECTED
-    assert event.detail == coordination.BODY_CHANGED_DETAIL and event.time == 1.0
+    with pytest.raises(coordination.IdentificationError, match="body_changes"):
+        coordination.step(state, RULE, 9.0, True, 1e-6, 40, 0.0, body_changes=-1)
+
+
+@pytest.mark.parametrize("samples", ["within", "none"])
+def test_a_body_change_the_camera_does_not_see_is_a_slip_after_the_rules_window(samples):
+    """Samples within the limit (new points that fit the model) or none at all (the tool unseen):
+    the report becomes a change detection for a slip (the camera kept) after
+    ``max_consecutive_violations`` ticks, not before."""
+    state, count = _observing()
+    n = RULE.max_consecutive_violations
+    for k in range(n):
+        count += samples == "within"
+        state, event = coordination.step(state, RULE, 1.0 + 0.1 * k, True, 1e-6, count, 1e-8, body_changes=1)
+        if k < n - 1:
+            assert event is None and state[coordination.MODE] == coordination.OBSERVE
+    assert event.kind == coordination.CHANGE_DETECTED and event.detail == coordination.BODY_CHANGED_DETAIL
+    assert event.time == pytest.approx(1.0 + 0.1 * (n - 1))
     assert state[coordination.MODE] == coordination.IDENTIFY and state[coordination.RESET_COUNT] == 1
     assert state[coordination.RESET_REASON] == coordination.OBSERVATION_FAILED
-    # Without the input the rule is the paper's: the same samples raise nothing.
-    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, True, 1e-6, 1, ok)
-    state, event = coordination.step(state, RULE, 0.1, True, 1e-6, 2, ok)
-    assert event is None and state[coordination.MODE] == coordination.OBSERVE
-    with pytest.raises(coordination.IdentificationError, match="body_changes"):
-        coordination.step(state, RULE, 0.2, True, 1e-6, 3, ok, body_changes=-1)
+    assert state[coordination.BODY_PENDING] == -1
+
+
+def test_a_body_change_the_camera_sees_is_the_rules_detection():
+    """A report while the samples go over the limit: the rule detects the change by itself, at its
+    tenth violation, as without the report (the ticks over the limit do not count for the report),
+    and the report is answered."""
+    state, count = _observing()
+    events = []
+    for k in range(3):  # within the limit, then the report arrives with the first violation
+        count += 1
+        state, event = coordination.step(state, RULE, 1.0 + 0.1 * k, True, 1e-6, count, 1e-8, body_changes=0)
+    for k in range(RULE.max_consecutive_violations + 5):
+        count += 1
+        state, event = coordination.step(state, RULE, 2.0 + 0.1 * k, False, 1e-6, count, 1.0, body_changes=1)
+        events += [event] if event else []  # not converged again: nothing to adopt after the detection
+    assert [e.detail for e in events] == [f"{RULE.max_consecutive_violations} samples over the limit"]
+    assert events[0].time == pytest.approx(2.0 + 0.1 * (RULE.max_consecutive_violations - 1))
+    assert state[coordination.BODY_PENDING] == -1
 
 
 class ScriptedBodyChanges(LeafSystem):
@@ -321,8 +354,8 @@ class ScriptedBodyChanges(LeafSystem):
 
 def test_the_state_machine_takes_the_body_changes_input():
     """A point on a babbling hand that never changes, and a body change reported at 6 s: the state
-    machine detects a change then, keeps the adopted model (the previous camera for a slip), and
-    identifies again."""
+    machine detects a change after the rule's window, keeps the adopted model (the previous camera
+    for a slip), and identifies again."""
     truth, _, _, _ = build(t_slip=np.inf)
     builder = DiagramBuilder()
     source = builder.AddSystem(ScriptedHandPoint(truth, truth.p_HP, np.inf, 0.1))
@@ -335,10 +368,11 @@ def test_the_state_machine_takes_the_body_changes_input():
     connect_identify_observe(builder, ident, sm)
     simulator = Simulator(builder.Build())
     context = sm.GetMyContextFromRoot(simulator.get_context())
-    simulator.AdvanceTo(6.5)
+    simulator.AdvanceTo(7.5)
     events = sm.events(context)
     assert [e.kind for e in events] == [coordination.CONVERGED, coordination.CHANGE_DETECTED]
-    assert events[0].time < 6.0 and events[1].time == pytest.approx(6.0)
+    # After the rule's window: max_consecutive_violations ticks of 0.1 s with no sample over the limit,
+    assert events[0].time < 6.0 and events[1].time == pytest.approx(6.0 + 0.1 * 9)  # the report's tick counts
     assert events[1].detail == coordination.BODY_CHANGED_DETAIL
     assert sm.GetOutputPort("reset_reason").Eval(context)[0] == coordination.OBSERVATION_FAILED
     assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)  # kept: the camera did not move

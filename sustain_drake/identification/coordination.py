@@ -28,10 +28,14 @@ identifier is kept reset (each tick bumps the reset count), since samples taken 
 moves fit no camera. Without these inputs (None) the rule is the one above, unchanged.
 
 Beyond the paper (``body_changes``, e.g. the wrist wrench's payload identification): a count of the
-held body's changes that another sensor detected. A new one in OBSERVE is a change detection for a
-slip (the reason ``OBSERVATION_FAILED``: the camera is kept), so a slip is found while no tracked
-point shows it (the tool out of view, or every point on it lost); in IDENTIFY it is only counted, as
-no model is adopted yet to drop. Without it (None) the rule is unchanged.
+held body's changes that another sensor detected. A new one in OBSERVE is a change of the body that
+the camera may not see (the tool out of view, or every point on it lost and new points, which fit
+the kept camera with their own ``p_HP``, observing). The observation rule is given the time it
+needs to confirm a change it sees, ``max_consecutive_violations`` ticks, and the camera's evidence
+comes first: ticks with a new sample over the limit do not count, so a slip the camera sees is
+detected by the rule as without this input. After that many other ticks, the report is a change
+detection for a slip (the reason ``OBSERVATION_FAILED``: the camera is kept). In IDENTIFY a report
+is only counted, as no model is adopted to drop. Without the input (None) the rule is unchanged.
 
 The state is a small flat vector (``CoordinationState``) so that a Drake system can hold it in its
 context; ``step`` is a pure function of it.
@@ -106,8 +110,9 @@ class CoordinationRule:
 
 # Layout of the state vector.
 (MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE,
- REFINEMENT, CAMERA_MOVES, CAMERA_MOVING, RESET_REASON, BODY_CHANGES) = range(14)
-STATE_SIZE = 14
+ REFINEMENT, CAMERA_MOVES, CAMERA_MOVING, RESET_REASON, BODY_CHANGES, BODY_PENDING) = range(15)
+STATE_SIZE = 15
+# BODY_PENDING: the ticks counted since a body change was reported in OBSERVE (-1: none pending)
 
 # Why the identifier was last reset (the state's RESET_REASON; the state machine's reset_reason port).
 NO_RESET = 0  # not reset yet
@@ -131,9 +136,11 @@ def _allowable_error(rule: CoordinationRule, expected_mse: float) -> float:
 
 
 def initial_state() -> np.ndarray:
-    """IDENTIFY, no violations, no adopted model, no requests yet, no sample seen (-1)."""
+    """IDENTIFY, no violations, no adopted model, no requests yet, no sample seen (-1), no body
+    change pending (-1)."""
     state = np.zeros(STATE_SIZE)
     state[LAST_SAMPLE] = -1.0
+    state[BODY_PENDING] = -1.0
     return state
 
 
@@ -185,8 +192,10 @@ def step(
         camera_moving, camera_moves: the camera-motion detector's ``[moving, moves]`` (None: no
             detector, the paper's rule alone): a count above the last one seen is a new camera move.
         body_changes: how many changes of the held body another sensor has detected (None: none
-            reports them): a count above the last one seen, in OBSERVE, is a change detection with
-            the reason ``OBSERVATION_FAILED`` (a slip, the camera kept).
+            reports them): a count above the last one seen, in OBSERVE, becomes a change detection
+            with the reason ``OBSERVATION_FAILED`` (a slip, the camera kept) after
+            ``max_consecutive_violations`` ticks without a new sample over the limit, unless the
+            rule detects the change first (see the module docstring).
 
     Raises IdentificationError for an argument of the wrong type or value: ``state`` not a real
     vector of STATE_SIZE, ``rule`` not a CoordinationRule, ``time`` not finite, ``converged`` and
@@ -213,9 +222,8 @@ def step(
             new[CAMERA_MOVING] = 0.0
     if body_changes is not None:
         new[BODY_CHANGES] = body_changes
-        if body_changes > state[BODY_CHANGES] and int(state[MODE]) == OBSERVE:
-            return _detect_change(new, sample_count, OBSERVATION_FAILED), Event(time, CHANGE_DETECTED,
-                                                                                BODY_CHANGED_DETAIL)
+        if body_changes > state[BODY_CHANGES] and int(state[MODE]) == OBSERVE and state[BODY_PENDING] < 0:
+            new[BODY_PENDING] = 0.0
     if int(state[MODE]) == IDENTIFY:
         stale = num_samples is not None and num_samples > sample_count - state[RESET_SAMPLE]
         if converged and math.isfinite(expected_mse) and not stale:
@@ -233,15 +241,17 @@ def step(
         new[SIGMA] = _allowable_error(rule, expected_mse)
         new[VIOLATIONS] = 0
         return new, Event(time, REFINED, f"allowable error {new[SIGMA]:.3g}")
-    if not new_sample:
-        return new, None
-    if sample_error > state[SIGMA] or not math.isfinite(sample_error):
-        new[VIOLATIONS] += 1
-    else:
-        new[VIOLATIONS] = 0
+    violation = new_sample and (sample_error > state[SIGMA] or not math.isfinite(sample_error))
+    if new_sample:
+        new[VIOLATIONS] = new[VIOLATIONS] + 1 if violation else 0
     if new[VIOLATIONS] >= rule.max_consecutive_violations:
         return _detect_change(new, sample_count, OBSERVATION_FAILED), Event(
             time, CHANGE_DETECTED, f"{rule.max_consecutive_violations} samples over the limit")
+    if new[BODY_PENDING] >= 0 and not violation:  # a tick the camera shows nothing against the model
+        new[BODY_PENDING] += 1
+        if new[BODY_PENDING] >= rule.max_consecutive_violations:
+            return _detect_change(new, sample_count, OBSERVATION_FAILED), Event(
+                time, CHANGE_DETECTED, BODY_CHANGED_DETAIL)
     return new, None
 
 
@@ -271,6 +281,7 @@ def _detect_change(new: np.ndarray, sample_count: int, reason: int) -> np.ndarra
     """A change detection (in place on ``new``) for ``reason``: back to IDENTIFY, the identifier
     reset (its solutions with more samples than arrive from now on are stale)."""
     new[RESET_REASON] = reason
+    new[BODY_PENDING] = -1.0  # a change detected for any reason answers a pending report
     new[MODE] = IDENTIFY
     new[VIOLATIONS] = 0
     new[RESET_COUNT] += 1
