@@ -273,9 +273,10 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
     ``hand_eye_reset_reason`` 1) keeps it. ``p_HP_valid`` and ``payload_valid`` are 1 while their
     loop observes an adopted estimate (its mode 1). ``hand_eye_allowable_error`` is 0 until the first
     convergence, then the last adoption's. With both loops and ``hand_eye.slip_from_wrench`` (the
-    default), each payload change detection is a hand-eye change detection too (a slip: a
-    ``change_detected`` event "the held body changed (another sensor)", ``hand_eye_reset_reason``
-    1, the camera kept), so a slip is found while the camera sees no point on the tool.
+    default), each payload change detection is a hand-eye change detection too, unless the hand-eye
+    observation detects it first (a slip: a ``change_detected`` event "the held body changed
+    (another sensor)", ``hand_eye_reset_reason`` 1, the camera kept), so a slip is found while the
+    camera sees no point on the tool.
 
     The motion interface (``systems.motion_generator.MotionGenerator`` answers it;
     docs/on_your_robot.md). Each request is edge-triggered by its ``request_id``: it is new when the

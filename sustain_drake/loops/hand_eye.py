@@ -298,7 +298,8 @@ def connect_wrench_watch(builder, loop: HandEyeLoop, payload: PayloadLoop | None
     """``slip_from_wrench``: the payload loop ``payload`` (or, if None, a new one of
     ``wrench_watch_config``, for ``num_joints`` joints) watches the held tool; each of
     its change detections (its state machine's ``reset`` count) is a slip for ``loop``'s state
-    machine (``body_changes``: the camera is kept, the tool point identified again). Left for the
+    machine (``body_changes``: unless the camera's observation rule sees it first, the camera is kept
+    and the tool point identified again). Left for the
     caller with a new loop: its identifier's ``wrench`` and ``kinematics_K`` and its gate's
     ``joint_velocities``; its ``pause`` is not used (the hand-eye loop pauses the arm). Returns the
     payload loop, also kept as ``loop.wrench_watch``."""

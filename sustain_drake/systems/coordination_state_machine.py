@@ -41,7 +41,8 @@ class CoordinationStateMachine(LeafSystem):
     rule alone. ``body_changes`` (optional, 1: a count of the held body's changes detected by another
     sensor; connect a payload loop's state machine's ``reset``, which counts the wrist wrench's change
     detections; beyond the paper): a new one in OBSERVE is a change detection for a slip, the camera
-    kept (``coordination.step``); unconnected, none.
+    kept, unless the observation rule detects the change itself within its window
+    (``coordination.step``); unconnected, none.
 
     Outputs: ``mode`` (1: 0 IDENTIFY, 1 OBSERVE); ``adopted_x`` (N, the adopted estimate; zeros
     while there is none: before the first convergence and from a camera move to the next
