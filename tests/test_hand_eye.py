@@ -20,7 +20,7 @@ from sustain_drake.experiments import hand_eye
 from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import own_fit
 from sustain_drake.identification.rotation import rotation_angle
-from sustain_drake.loops.hand_eye import connect_wrench_watch, hand_eye_parts
+from sustain_drake.loops.hand_eye import hand_eye_parts
 from sustain_drake.loops.identify_observe import connect_identify_observe
 from sustain_drake.perception.optical_flow import TrackedFeatures
 from sustain_drake.station import build_station, load_scenario
@@ -99,10 +99,7 @@ def add_scripted_loop(builder, disturbances: list, blind=(np.inf, np.inf),
     builder.Connect(machine.GetOutputPort("allowable_error"), candidates.GetInputPort("allowable_error"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     if wrench_watch:
-        loop = SimpleNamespace(state_machine=machine, wrench_watch=None)  # what connect_wrench_watch uses
-        n = station.GetOutputPort("joint_positions").size()
-        watch = connect_wrench_watch(builder, loop, num_joints=n)
-        hand_eye.connect_station_wrench(builder, station, watch)
+        hand_eye.add_wrench_watch(builder, station, machine, station.GetOutputPort("joint_positions").size())
     return SimpleNamespace(scenario=scenario, station=station, source=source, candidates=candidates,
                            machine=machine)
 

@@ -36,8 +36,15 @@ from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import best_p_HP_given_camera
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
-from sustain_drake.loops.hand_eye import HandEyeParts, add_hand_eye_loop, connect_wrench_watch, hand_eye_parts
+from sustain_drake.loops.hand_eye import (
+    HandEyeParts,
+    add_hand_eye_loop,
+    connect_wrench_watch,
+    hand_eye_parts,
+    wrench_watch_config,
+)
 from sustain_drake.loops.inspection import add_estimate_overlay, add_inspection
+from sustain_drake.loops.payload import PayloadLoop, add_payload_loop
 from sustain_drake.station import ScenarioError, camera_info
 from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of, timeline
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
@@ -65,7 +72,7 @@ class HandEyeHandle:
     loggers: dict
     camera_motion: CameraMotionDetector | None = None
     tool_boxes: tuple = ()  # the held tool's geometry in its frame T (``hand_eye_metrics.Box``)
-    wrench_watch: object | None = None  # the payload loop watching the held tool (``slip_from_wrench``)
+    wrench_watch: PayloadLoop | None = None  # the payload loop watching the held tool (``slip_from_wrench``)
 
 
 def build_loop(builder, station, scenario, parts: HandEyeParts | None = None):
@@ -99,12 +106,21 @@ def build_loop(builder, station, scenario, parts: HandEyeParts | None = None):
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     if config.slip_from_wrench:  # the wrist wrench's payload identification watches the held tool
-        connect_station_wrench(builder, station, connect_wrench_watch(builder, loop, num_joints=len(
-            arm_of(scenario).joints)))
+        loop.wrench_watch = add_wrench_watch(builder, station, machine, len(arm_of(scenario).joints))
     return loop
 
 
-def connect_station_wrench(builder, station, payload) -> None:
+def add_wrench_watch(builder, station, machine, num_joints: int) -> PayloadLoop:
+    """``slip_from_wrench``: a payload loop of ``wrench_watch_config`` on ``station``'s wrist wrench
+    (``connect_station_wrench``), its change detections reported to the hand-eye state machine
+    ``machine`` (``connect_wrench_watch``). Returns the payload loop."""
+    payload = add_payload_loop(builder, num_joints, wrench_watch_config())
+    connect_station_wrench(builder, station, payload)
+    connect_wrench_watch(builder, machine, payload)
+    return payload
+
+
+def connect_station_wrench(builder, station, payload: PayloadLoop) -> None:
     """The station's wrist wrench, the sensor frame's kinematics and the joint velocities into the
     dynamic-mode payload loop ``payload`` (a ``loops.payload.PayloadLoop``)."""
     builder.Connect(station.GetOutputPort("wrench"), payload.identifier.GetInputPort("wrench"))

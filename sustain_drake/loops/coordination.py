@@ -328,7 +328,7 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
     if payload is not None:
         _connect_payload(builder, a, payload, X_WK, inputs)
         if vision is not None and a.hand_eye.slip_from_wrench:  # the wrench's change is a slip
-            connect_wrench_watch(builder, vision, payload)
+            connect_wrench_watch(builder, vision.state_machine, payload)
     for name, ports in inputs.items():
         _export_input(builder, name, ports)
     _export_outputs(builder, vision, payload)

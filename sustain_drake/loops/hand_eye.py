@@ -13,7 +13,7 @@ import numpy as np
 from sustain_drake.identification.candidates import CandidateParams
 from sustain_drake.loops.body_detection import BodyDetectionConfig, add_body_detection
 from sustain_drake.loops.identify_observe import CoordinationConfig, connect_identify_observe
-from sustain_drake.loops.payload import KinestheticConfig, PayloadLoop, add_payload_loop
+from sustain_drake.loops.payload import KinestheticConfig, PayloadLoop
 from sustain_drake.loops.pixel_scale import RAD_PER_PX_MEASURED, pixel_scale, scaled
 from sustain_drake.perception.camera_motion import CameraMotionParams
 from sustain_drake.perception.point_refinement import RefinementParams
@@ -171,7 +171,7 @@ class HandEyeLoop:
     camera_motion: CameraMotionDetector | None = None
     identifying_motion: IdentifyingMotion | None = None
     # the payload loop watching the held tool (``slip_from_wrench``), added by the caller that has
-    # the wrench (``connect_wrench_watch``)
+    # the wrench and linked by ``connect_wrench_watch``
     wrench_watch: PayloadLoop | None = None
 
     def image_inputs(self, name: str) -> list:
@@ -293,19 +293,10 @@ def wrench_watch_config() -> KinestheticConfig:
     return KinestheticConfig(enabled=True, mode="dynamic")
 
 
-def connect_wrench_watch(builder, loop: HandEyeLoop, payload: PayloadLoop | None = None,
-                         num_joints: int | None = None) -> PayloadLoop:
-    """``slip_from_wrench``: the payload loop ``payload`` (or, if None, a new one of
-    ``wrench_watch_config``, for ``num_joints`` joints) watches the held tool; each of
-    its change detections (its state machine's ``reset`` count) is a slip for ``loop``'s state
-    machine (``body_changes``: unless the camera's observation rule sees it first, the camera is kept
-    and the tool point identified again). Left for the
-    caller with a new loop: its identifier's ``wrench`` and ``kinematics_K`` and its gate's
-    ``joint_velocities``; its ``pause`` is not used (the hand-eye loop pauses the arm). Returns the
-    payload loop, also kept as ``loop.wrench_watch``."""
-    if payload is None:
-        payload = add_payload_loop(builder, num_joints, wrench_watch_config())
-    changes = payload.state_machine.GetOutputPort("reset")  # counts the payload's change detections
-    builder.Connect(changes, loop.state_machine.GetInputPort("body_changes"))
-    loop.wrench_watch = payload
-    return payload
+def connect_wrench_watch(builder, machine: CoordinationStateMachine, payload: PayloadLoop) -> None:
+    """``slip_from_wrench``: each change detection of the payload loop ``payload`` (its state
+    machine's ``reset`` count) is reported to the hand-eye state machine ``machine``
+    (``body_changes``: unless the camera's observation rule sees the change first, it is a slip, the
+    camera kept and the tool point identified again). The payload loop's ``pause`` is left unused:
+    the hand-eye loop pauses the arm."""
+    builder.Connect(payload.state_machine.GetOutputPort("reset"), machine.GetInputPort("body_changes"))

@@ -122,16 +122,16 @@ class CoordinationStateMachine(LeafSystem):
     def _update(self, context, state) -> None:
         solution = self._solution_in.Eval(context)
         sample_count, sample_error = self._observation.Eval(context)
-        camera = {}  # the optional inputs' keyword arguments
+        optional = {}  # the connected optional inputs, as ``coordination.step``'s keyword arguments
         if self._camera_motion.HasValue(context):
             moving, moves = self._camera_motion.Eval(context)
-            camera = {"camera_moving": bool(moving > 0.5), "camera_moves": int(moves)}
+            optional = {"camera_moving": bool(moving > 0.5), "camera_moves": int(moves)}
         if self._body_changes.HasValue(context):
-            camera["body_changes"] = int(self._body_changes.Eval(context)[0])
+            optional["body_changes"] = int(self._body_changes.Eval(context)[0])
         new, event = coordination.step(
             self._vector(context), self._rule, context.get_time(), solution.verdict.converged,
             solution.expected_mse, int(sample_count), float(sample_error), int(solution.num_samples),
-            int(getattr(solution, "refinement", 0)), **camera,
+            int(getattr(solution, "refinement", 0)), **optional,
         )  # fmt: skip
         state.get_mutable_discrete_state(self._state).set_value(new)
         if event is not None:
