@@ -98,17 +98,20 @@ def target_lines(table: pd.DataFrame, experiment: str) -> list[str]:
     return lines
 
 
-def bench_main(argv, doc: str, sweep: str, experiment: str, columns: list[str], row_text,
+def bench_main(argv, doc: str, sweep: str, experiment: str | None, columns: list[str], row_text,
                extra=lambda table: [], block: str | None = None) -> int:
     """A bench's whole run: its options, its sweep's cells, then a table (``columns``, one
-    ``row_text(row)`` per cell), the targets of ``experiment`` and ``extra(table)`` lines, printed
-    and, with ``--results``, published as the block ``block`` (default ``bench_<experiment>``)."""
+    ``row_text(row)`` per cell; none when ``columns`` is empty), the targets of ``experiment``
+    (none when it is None) and ``extra(table)`` lines, printed and, with ``--results``, published
+    as the block ``block`` (default ``bench_<experiment>``)."""
     block = block or f"bench_{experiment}"
     args = sweep_arguments(doc.splitlines()[0], sweep, block).parse_args(argv)
     table = run_bench(args)
-    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += [row_text(row) for _, row in table.iterrows()]
-    lines += target_lines(table, experiment) + extra(table)
+    lines = []
+    if columns:  # else ``extra`` tables the cells itself
+        lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+        lines += [row_text(row) for _, row in table.iterrows()]
+    lines += (target_lines(table, experiment) if experiment else []) + extra(table)
     if "commit" in table and not table.empty:
         lines.append("- cells run at commit(s): " + ", ".join(f"`{c}`" for c in sorted(set(table["commit"]))))
     total = len(select_cells(load_sweep(args.sweep), args.cells, args.duration).cells)

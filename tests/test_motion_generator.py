@@ -9,7 +9,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from sustain_drake.systems.motion_generator import MotionGenerator, quintic
+from sustain_drake.systems.motion_generator import MotionGenerator, move_duration, quintic
 
 LOWER = np.array([-0.5, 0.0, 0.5])
 UPPER = np.array([0.5, 0.8, 1.5])
@@ -24,10 +24,10 @@ def _source(value):
     return ConstantVectorSource(value)
 
 
-def run(generator: MotionGenerator, duration: float, dt: float = 0.01, pause=None, confirm=None):
+def run(generator: MotionGenerator, duration: float, dt: float = 0.01, pause=None, confirm=None, goal=None):
     builder = DiagramBuilder()
     builder.AddSystem(generator)
-    for name, value in (("pause", pause), ("confirm", confirm)):
+    for name, value in (("pause", pause), ("confirm", confirm), ("goal", goal)):
         if value is not None:
             source = builder.AddSystem(_source(value))
             builder.Connect(source.get_output_port(), generator.GetInputPort(name))
@@ -72,6 +72,30 @@ def test_same_seed_same_motion_other_seed_other_motion():
     _, c = run(MotionGenerator(LOWER, UPPER, START, seed=4), 5.0)
     np.testing.assert_array_equal(a, b)
     assert np.max(np.abs(a - c)) > 0.05
+
+
+def test_a_goal_input_sets_every_babbling_move_the_first_included():
+    """Connected, ``goal`` is where each babbling move goes (clipped to the ranges), from the first
+    move on, at the pace; its moves last as ``move_duration`` says."""
+    goals = ([0.0, 1.8, 4.5, 20.0], [[0.3, 0.7, 0.6], [-0.4, 0.1, 1.4], [0.9, -1.0, 1.2], [0.9, -1.0, 1.2]])
+    gen = MotionGenerator(LOWER, UPPER, START, seed=2, max_speed=0.5, min_duration=1.0, dwell=0.5)
+    times, x = run(gen, 9.5, goal=goals)
+    q = x[:, :3]
+    first = move_duration(START, np.array(goals[1][0]), 0.5, 1.0)  # 15/8 0.4 / 0.5 = 1.5 s
+    assert first == pytest.approx(1.5)
+    at = int(round((first + 0.1) / 0.01))  # resting after the first move
+    np.testing.assert_allclose(q[at], goals[1][0], atol=1e-9)
+    # The next move starts after the rest (2.0 s), towards the goal read then (the second one).
+    second = int(round((first + 0.5 + move_duration(np.array(goals[1][0]), np.array(goals[1][1]), 0.5, 1.0)
+                        + 0.1) / 0.01))
+    np.testing.assert_allclose(q[second], goals[1][1], atol=1e-9)
+    # A goal outside the ranges is clipped to them.
+    assert np.all(q >= LOWER - 1e-9) and np.all(q <= UPPER + 1e-9)
+    np.testing.assert_allclose(q[-1], np.clip(goals[1][2], LOWER, UPPER), atol=1e-9)
+    # Without the input the same generator babbles elsewhere.
+    plain = MotionGenerator(LOWER, UPPER, START, seed=2, max_speed=0.5, min_duration=1.0, dwell=0.5)
+    _, free = run(plain, 2.0)
+    assert np.max(np.abs(free[at, :3] - goals[1][0])) > 0.05
 
 
 def test_dwell_rests_after_each_move():

@@ -184,7 +184,7 @@ def test_exported_ports_match_the_documented_list():
     names = {diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())}
     assert names == set(EXPORTED_OUTPUTS)
     inputs = {diagram.get_input_port(i).get_name() for i in range(diagram.num_input_ports())}
-    assert inputs == {"motion_pause", "motion_confirm"}
+    assert inputs == {"motion_pause", "motion_confirm", "motion_goal"}
 
 
 @pytest.mark.parametrize("text, key", [

@@ -5,6 +5,7 @@ import pytest
 from pydrake.common.value import AbstractValue
 from scipy.spatial.transform import Rotation
 
+from sustain_drake.identification import payload_dynamic
 from sustain_drake.identification.payload import STANDARD_GRAVITY_W
 from sustain_drake.identification.touch import Box, Cylinder, Sphere, locate_touch, predicted_wrench
 
@@ -102,15 +103,18 @@ def test_touch_estimator_system_on_a_synthetic_wrench():
     F_env_K = F_env_K if F_env_K[2] < 0 else -F_env_K  # pushing into the +z face
     reading = predicted_wrench(mass, p_KCm, R_WK, STANDARD_GRAVITY_W) + residual_for(p_KP, F_env_K)
 
-    def run(wrench):
+    def run(wrench, kinematics=None):
         builder = DiagramBuilder()
-        est = builder.AddSystem(TouchEstimator(DrakeBox(0.1, 0.08, 0.1), X_KG))
-        for port, source in (
+        est = builder.AddSystem(TouchEstimator(DrakeBox(0.1, 0.08, 0.1), X_KG, min_force=2.0))
+        sources = [
             ("wrench", ConstantVectorSource(wrench)),
             ("X_WK", ConstantValueSource(AbstractValue.Make(X_WK))),
             ("payload", ConstantValueSource(AbstractValue.Make(solution))),
             ("allowable_error", ConstantVectorSource([100 * max(solution.expected_mse, 1e-8)])),
-        ):
+        ]
+        if kinematics is not None:
+            sources.append(("kinematics_K", ConstantVectorSource(kinematics)))
+        for port, source in sources:
             builder.Connect(builder.AddSystem(source).get_output_port(), est.GetInputPort(port))
         diagram = builder.Build()
         ctx = est.GetMyContextFromRoot(diagram.CreateDefaultContext())
@@ -126,3 +130,17 @@ def test_touch_estimator_system_on_a_synthetic_wrench():
     noise = np.concatenate([rng.normal(0, 5e-4, 3), rng.normal(0, 0.02, 3)])
     quiet = run(predicted_wrench(mass, p_KCm, R_WK, STANDARD_GRAVITY_W) + noise)
     assert quiet["touch"][0] == 0.0 and not quiet["p_KP"].any()
+
+    # A fast move (5 m/s^2 of the sensor, turning at 2 rad/s and 4 rad/s^2): the payload's inertial
+    # force is 3 N, a false touch under the quasi-static prediction; with the sensor's kinematics the
+    # moving payload's wrench is predicted and it is not a touch, while a touch during the move
+    # still is, at the same point.
+    g_K = R_WK.T @ STANDARD_GRAVITY_W
+    kinematics = np.concatenate([[0.0, 2.0, 0.5], [4.0, 0.0, -1.0], np.array([5.0, 0.0, 0.0]) - g_K])
+    phi = payload_dynamic.inertial_parameters(mass, p_KCm, np.zeros((3, 3)))
+    moving = payload_dynamic.predicted_wrench(phi, np.zeros(6), kinematics)
+    assert np.linalg.norm(moving[3:] - predicted_wrench(mass, p_KCm, R_WK, STANDARD_GRAVITY_W)[3:]) > 3.0
+    assert run(moving + noise)["touch"][0] == 1.0  # quasi-static: taken for a touch
+    assert run(moving + noise, kinematics)["touch"][0] == 0.0
+    touched = run(moving + residual_for(p_KP, F_env_K), kinematics)
+    assert touched["touch"][0] == 1.0 and np.linalg.norm(touched["p_KP"] - p_KP) < 1e-6

@@ -26,12 +26,20 @@ from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from sustain_drake.calibration_export import CalibrationExportError, payload_yaml
 from sustain_drake.files import write_atomically
-from sustain_drake.identification import coordination, payload_dynamic
+from sustain_drake.identification import coordination, payload, payload_dynamic
 from sustain_drake.identification.payload_dynamic import DynamicPayloadSolution
 from sustain_drake.loops.payload import add_payload_loop
-from sustain_drake.station import held_shape, sensor_pose_in_hand
-from sustain_drake.station.scenario import arm_of
+from sustain_drake.station import (
+    babbling_joints,
+    babbling_ranges,
+    held_shape,
+    sensor_frame,
+    sensor_pose_in_hand,
+)
+from sustain_drake.station.scenario import arm_motion, arm_of
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
+from sustain_drake.systems.exciting_postures import ExcitingPostures
+from sustain_drake.systems.motion_generator import Pace
 from sustain_drake.systems.sustainable_identifier_system import SustainableIdentifierSystem
 from sustain_drake.systems.touch_estimator import TouchEstimator
 
@@ -62,13 +70,19 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
     for system in (ident, estimator):
         builder.Connect(wrench, system.GetInputPort("wrench"))
     builder.Connect(X_WK, estimator.GetInputPort("X_WK"))
+    # The sensor frame's kinematics from the plant, at the wrench's instants: the touch estimator
+    # predicts the moving payload's wrench, and the dynamic mode identifies from it.
+    kinematics = station.GetOutputPort("sensor_kinematics")
+    builder.Connect(kinematics, estimator.GetInputPort("kinematics_K"))
     dynamic = config.mode == "dynamic"
-    if dynamic:  # the sensor frame's kinematics from the plant, at the wrench's instants
-        builder.Connect(station.GetOutputPort("sensor_kinematics"), ident.GetInputPort("kinematics_K"))
+    if dynamic:
+        builder.Connect(kinematics, ident.GetInputPort("kinematics_K"))
     else:
         builder.Connect(X_WK, ident.GetInputPort("X_WK"))
     builder.Connect(station.GetOutputPort("joint_velocities"), gate.GetInputPort("joint_velocities"))
     builder.Connect(sm.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
+    if config.excite and not dynamic:
+        add_exciting_postures(builder, station, scenario, ident)
     if station.HasInputPort("touch_start"):
         builder.Connect(sm.GetOutputPort("mode"), station.GetInputPort("touch_start"))
         builder.Connect(estimator.GetOutputPort("touch"), station.GetInputPort("touch_feedback"))
@@ -90,6 +104,23 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
     loggers = {name: LogVectorOutput(port, builder, period) for name, port in sources.items()}
     return KinestheticHandle(ident, sm, estimator, loggers, config.eval_min_force,
                              np.array(scenario.wrench_sensor.bias, dtype=float))
+
+
+def add_exciting_postures(builder: DiagramBuilder, station, scenario, ident) -> ExcitingPostures:
+    """The babbling's next posture from the static payload identifier's statistic (``kinesthetic.excite``):
+    each rest gives the quasi-static samples of ``motion.dwell`` less the gate's ``window``."""
+    m, config = arm_motion(scenario), scenario.kinesthetic
+    joints = babbling_joints(station, scenario)
+    rest_samples = max(m.dwell - config.quasi_static.window, config.period) / config.period
+    information = payload.PostureInformation(ident.formulation.gravity_W, rest_samples)
+    chooser = builder.AddSystem(ExcitingPostures(
+        station.GetSubsystemByName("plant"), sensor_frame(station), joints, babbling_ranges(scenario, joints),
+        Pace(m.max_speed, m.min_duration, m.dwell), information, seed=m.seed))  # fmt: skip
+    chooser.set_name("exciting_postures")
+    builder.Connect(ident.GetOutputPort("statistic"), chooser.GetInputPort("statistic"))
+    builder.Connect(station.GetOutputPort("joint_positions"), chooser.GetInputPort("joint_positions"))
+    builder.Connect(chooser.GetOutputPort("goal"), station.GetInputPort("motion_goal"))
+    return chooser
 
 
 def _logs(handle: KinestheticHandle, context):

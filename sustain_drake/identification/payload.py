@@ -94,6 +94,47 @@ def _build_A(wrench_K: np.ndarray, R_WK: np.ndarray, g_W: np.ndarray, out=None) 
     return A
 
 
+def posture_information(state: np.ndarray, R_WK_candidates, g_W: np.ndarray, samples: float):
+    """The information ``M`` the statistic holds on the unknowns ``[1/m; p_KCm]`` and, for each
+    candidate sensor orientation ``R_WK``, the information ``dM`` that ``samples`` quasi-static
+    samples there add (``identification.excitation``; issue 25).
+
+    ``state`` is a ``PayloadIdentifier``'s state ``[S (25) | n_eff | count]``; ``M`` is S's block
+    over the unknowns. A candidate's samples are predicted at rest (Eq. (37) with ``f_K = -m R_WK^T
+    g_W``) with the mass the statistic implies, ``m^2 = S[0, 0] / (n_eff |g_W|^2)`` (each
+    quasi-static sample adds ``|R_WK f_K|^2 = m^2 |g_W|^2`` to ``S[0, 0]``), or 1 kg before any
+    sample: only ``f_K``'s direction, ``R_WK^T g_W``, moves ``dM``, and its scale must match ``M``'s.
+    The torque column is the measurement's, not an unknown's, so it needs no prediction."""
+    state = np.asarray(state, dtype=float)
+    n2 = N_UNKNOWNS * N_UNKNOWNS
+    S = state[:n2].reshape(N_UNKNOWNS, N_UNKNOWNS)
+    n_eff = float(state[n2])
+    g_W = np.asarray(g_W, dtype=float)
+    m = math.sqrt(S[0, 0] / (n_eff * float(g_W @ g_W))) if n_eff > 0 and S[0, 0] > 0 else 1.0
+    unknowns = slice(0, N_UNKNOWNS - 1)
+    added = []
+    for R_WK in R_WK_candidates:
+        R_WK = np.asarray(R_WK, dtype=float)
+        wrench = np.concatenate([np.zeros(3), -m * (R_WK.T @ g_W)])
+        Phi = _build_A(wrench, R_WK, g_W)[:, unknowns]
+        added.append(samples * (Phi.T @ Phi))
+    return S[unknowns, unknowns].copy(), added
+
+
+@dataclass(frozen=True)
+class PostureInformation:
+    """``posture_information`` as a callable ``(state, R_WK_candidates) -> (M, [dM])`` for
+    ``systems.ExcitingPostures``: gravity ``g_W`` (m/s^2) and the quasi-static ``samples`` a rest at
+    a posture gives."""
+
+    g_W: np.ndarray
+    samples: float
+    num_unknowns: ClassVar[int] = N_UNKNOWNS
+
+    def __call__(self, state, R_WK_candidates):
+        return posture_information(state, R_WK_candidates, self.g_W, self.samples)
+
+
 @dataclass(frozen=True, slots=True)
 class PayloadSolution(SolutionProperties):
     """Everything one solve gives.

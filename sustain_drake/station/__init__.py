@@ -6,14 +6,18 @@
 
 from sustain_drake.station.build import (
     EXPORTED_OUTPUTS,
+    babbling_joints,
+    babbling_ranges,
     build_station,
     camera_info,
     held_shape,
+    sensor_frame,
     sensor_pose_in_hand,
 )
 from sustain_drake.station.models import models_dir
 from sustain_drake.station.scenario import Scenario, ScenarioError
 from sustain_drake.station.scenario_files import load_scenario
 
-__all__ = ["EXPORTED_OUTPUTS", "Scenario", "ScenarioError", "build_station", "camera_info",
-           "held_shape", "load_scenario", "models_dir", "sensor_pose_in_hand"]
+__all__ = ["EXPORTED_OUTPUTS", "Scenario", "ScenarioError", "babbling_joints", "babbling_ranges",
+           "build_station", "camera_info", "held_shape", "load_scenario", "models_dir", "sensor_frame",
+           "sensor_pose_in_hand"]

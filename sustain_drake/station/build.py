@@ -180,6 +180,18 @@ def held_shape(station):
     return inspector.GetShape(geometries[0]), RigidTransform(X_KG)
 
 
+def babbling_joints(station, scenario: Scenario) -> list:
+    """The arm's babbling joints (base to hand) in the station's plant."""
+    plant = station.GetSubsystemByName("plant")
+    arm = plant.GetJointByName(SENSOR_JOINT).child_body().model_instance()
+    return [plant.GetJointByName(name, arm) for name in arm_of(scenario).joints]
+
+
+def sensor_frame(station):
+    """The wrist sensor's frame K (the weld's child frame) in the station's plant."""
+    return station.GetSubsystemByName("plant").GetJointByName(SENSOR_JOINT).frame_on_child()
+
+
 def sensor_pose_in_hand(station) -> RigidTransform:
     """``X_HK``: the wrist sensor's frame K (the weld's child frame) in the hand frame H."""
     plant = station.GetSubsystemByName("plant")
@@ -204,7 +216,8 @@ def build_station(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram
 
     Exported outputs: see ``EXPORTED_OUTPUTS`` and docs/simulation.md (the
     camera ports exist only when the scenario's camera renders them). Exported inputs:
-    ``motion_pause`` and ``motion_confirm`` (the MotionGenerator's requests). With a
+    ``motion_pause``, ``motion_confirm`` and ``motion_goal`` (the MotionGenerator's requests and
+    its next babbling goal). With a
     ``meshcat``, the scene is also drawn there (illustration geometry). A scenario the world
     cannot be built from raises ``ScenarioError``.
     """
@@ -272,15 +285,23 @@ def _add_world(builder: DiagramBuilder, scenario: Scenario) -> _World:
     return _World(plant, scene_graph, arm_model, arm, head, person, tool, tool_body, posture)
 
 
-def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
-    """Babbling arm: its joints from the motion generator, the gripper held closed."""
-    m, joints = arm_motion(scenario), world.joints
+def babbling_ranges(scenario: Scenario, joints) -> tuple[list[float], list[float]]:
+    """``(lower, upper)``, rad: the babbling's joint ranges (``motion.joint_ranges``, or the arm's
+    own) clipped to the ``joints``' limits. ScenarioError when a range lies outside them."""
+    m = arm_motion(scenario)
     lower = [max(r[0], j.position_lower_limits()[0])
              for r, j in zip(m.joint_ranges, joints, strict=True)]
     upper = [min(r[1], j.position_upper_limits()[0])
              for r, j in zip(m.joint_ranges, joints, strict=True)]
     if any(lo > hi for lo, hi in zip(lower, upper, strict=True)):
         raise ScenarioError("motion.joint_ranges lie outside the arm's joint limits")
+    return lower, upper
+
+
+def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
+    """Babbling arm: its joints from the motion generator, the gripper held closed."""
+    m, joints = arm_motion(scenario), world.joints
+    lower, upper = babbling_ranges(scenario, joints)
     motion = builder.AddSystem(MotionGenerator(
         lower, upper, world.posture, seed=m.seed, max_speed=m.max_speed,
         min_duration=m.min_duration, dwell=m.dwell, period=m.period,
@@ -307,6 +328,7 @@ def _add_motion_generator(builder, world: _World, scenario: Scenario) -> None:
         _add_arm_gravity_compensation(builder, world)
     builder.ExportInput(motion.GetInputPort("pause"), "motion_pause")
     builder.ExportInput(motion.GetInputPort("confirm"), "motion_confirm")
+    builder.ExportInput(motion.GetInputPort("goal"), "motion_goal")
 
 
 def _add_arm_gravity_compensation(builder, world: _World) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
@@ -37,6 +39,26 @@ def quintic(q0: np.ndarray, q1: np.ndarray, duration: float, s: float, v0=None):
 _PEAK_OVER_MEAN = 15.0 / 8.0
 
 
+class Pace(NamedTuple):
+    """The babbling's pace: peak joint speed (rad/s), shortest move (s), rest after a move (s)."""
+
+    max_speed: float
+    min_duration: float
+    dwell: float
+
+
+def shortest_move_reach(max_speed: float, min_duration: float) -> float:
+    """rad: the largest joint change a move of ``min_duration`` covers at ``max_speed`` (the
+    inverse of ``move_duration``)."""
+    return max_speed * min_duration / _PEAK_OVER_MEAN
+
+
+def move_duration(q0: np.ndarray, q1: np.ndarray, max_speed: float, min_duration: float) -> float:
+    """s: how long a babbling move from ``q0`` to ``q1`` lasts, ``max(min_duration, 15/8
+    |q1 - q0|_max / max_speed)``, so no joint's peak speed exceeds ``max_speed`` (rad/s)."""
+    return max(min_duration, _PEAK_OVER_MEAN * float(np.max(np.abs(np.asarray(q1) - q0))) / max_speed)
+
+
 class MotionGenerator(LeafSystem):
     """Smooth random joint-space motions (babbling) for identification, as in the paper.
 
@@ -46,6 +68,7 @@ class MotionGenerator(LeafSystem):
         input_ports:
         - pause (optional)
         - confirm (optional)
+        - goal (optional)
         output_ports:
         - desired_state
 
@@ -54,7 +77,10 @@ class MotionGenerator(LeafSystem):
     within ``[lower, upper]``; each move lasts ``max(min_duration, 15/8 |dq|_max /
     max_speed)`` so no joint exceeds ``max_speed``, and may be followed by a rest of ``dwell``
     seconds (quasi-static samples for the inertia identification). The k-th goal is drawn
-    from a generator seeded with ``(seed, k)``, so runs are reproducible.
+    from a generator seeded with ``(seed, k)``, so runs are reproducible. ``goal`` (n, rad;
+    optional): when connected and finite, each babbling move goes there instead (clipped to the
+    ranges), e.g. the posture an ``ExcitingPostures`` chose, the first move included (its goal is
+    read at the first update); the confirming moves stay as they are.
 
     Requests are edge-triggered by an id, so holding a value does not repeat the request:
 
@@ -129,6 +155,7 @@ class MotionGenerator(LeafSystem):
         self._state = self.DeclareDiscreteState(x0)
         self._pause = self.DeclareVectorInputPort("pause", 2)
         self._confirm = self.DeclareVectorInputPort("confirm", 2 + n)
+        self._goal_in = self.DeclareVectorInputPort("goal", n)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort("desired_state", BasicVector(2 * n), self._calc_desired,
                                      {self.time_ticket(), self.xd_ticket()})
@@ -166,8 +193,7 @@ class MotionGenerator(LeafSystem):
         return np.clip(goal, self._lower, self._upper)
 
     def _move_duration(self, q0: np.ndarray, q1: np.ndarray) -> float:
-        return max(self._min_duration,
-                   _PEAK_OVER_MEAN * float(np.max(np.abs(q1 - q0))) / self._max_speed)
+        return move_duration(q0, q1, self._max_speed, self._min_duration)
 
     def _desired(self, x: np.ndarray, t: float):
         n, h = self._n, _HEADER
@@ -239,6 +265,14 @@ class MotionGenerator(LeafSystem):
                 self._brake(x, t, q_now, v_now)
                 discrete_state.set_value(self._state, x)
                 return
+        if x[_SEGMENT] == 1 and x[_KIND] == _MOVE and t - x[_T0] < 0.5 * self._period \
+                and self._goal_in.HasValue(context):
+            # The first update: with a goal input, the first move too goes where it says.
+            goal = self._babbling_goal(context, 0)
+            self._start(x, t, x[_HEADER:_HEADER + self._n], goal,
+                        self._move_duration(x[_HEADER:_HEADER + self._n], goal), _MOVE)
+            discrete_state.set_value(self._state, x)
+            return
         if t < x[_T0] + x[_DURATION]:
             return
         k = int(x[_SEGMENT])
@@ -269,7 +303,16 @@ class MotionGenerator(LeafSystem):
             x[_SEGMENT] = k + 1
             self._start(x, t, q_now, goal, self._move_duration(q_now, goal), _MOVE)
         else:
-            goal = self._goal(k)
+            goal = self._babbling_goal(context, k)
             x[_SEGMENT] = k + 1
             self._start(x, t, q_now, goal, self._move_duration(q_now, goal), _MOVE)
         discrete_state.set_value(self._state, x)
+
+    def _babbling_goal(self, context, k: int) -> np.ndarray:
+        """The next babbling move's goal: the ``goal`` input when connected and finite (within the
+        ranges), else the k-th random goal."""
+        if self._goal_in.HasValue(context):
+            goal = self._goal_in.Eval(context)
+            if np.all(np.isfinite(goal)):
+                return np.clip(goal, self._lower, self._upper)
+        return self._goal(k)

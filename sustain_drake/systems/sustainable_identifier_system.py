@@ -244,6 +244,7 @@ class SustainableIdentifierSystem(LeafSystem):
         - expected_mse
         - observation
         - solution
+        - statistic
         - <outputs of the formulation> (eye-to-hand: X_WC, p_HP; payload: mass, p_KCm; dynamic
           payload: mass, p_KCm, I_BBcm, wrench_bias)
 
@@ -260,7 +261,8 @@ class SustainableIdentifierSystem(LeafSystem):
       num_samples]``), ``observation`` (2: ``[sample_count, s_t]``: valid samples seen since
       construction, never reset, and ``s_t = ||A_t x||^2`` of the latest one under the reference
       estimate, before it was added), ``solution`` (the formulation's solution object, with the
-      verdict's reason).
+      verdict's reason), ``statistic`` (N^2 + 2: the statistic's state ``[S | n_eff | count]``,
+      e.g. for an ``ExcitingPostures``).
 
     State: discrete group 0 is the statistic (N^2 + 2), group 1 ``[last reset value,
     sample_count, s_t]``; the solution is abstract state.
@@ -290,6 +292,7 @@ class SustainableIdentifierSystem(LeafSystem):
             prerequisites_of_calc={self.all_state_ticket()},
         )  # fmt: skip
         self.DeclareStateOutputPort("solution", self._solution)
+        self.DeclareStateOutputPort("statistic", self._statistic)
         formulation.declare_outputs(self, self.solution)
 
     @property

@@ -12,9 +12,8 @@ from pydrake.geometry import Sphere as DrakeSphere
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
-from sustain_drake.identification import touch
-from sustain_drake.identification.payload import STANDARD_GRAVITY_W, build_A
-from sustain_drake.identification.sustainable_identifier import SustainableIdentifier
+from sustain_drake.identification import payload_dynamic, touch
+from sustain_drake.identification.payload import STANDARD_GRAVITY_W
 
 
 def shape_from_drake(shape) -> touch.Shape:
@@ -39,6 +38,7 @@ class TouchEstimator(LeafSystem):
         - X_WK
         - payload
         - allowable_error
+        - kinematics_K (optional)
         output_ports:
         - touch
         - p_KP
@@ -50,8 +50,13 @@ class TouchEstimator(LeafSystem):
     ``identification.payload``), ``X_WK`` the sensor pose, ``payload`` the adopted payload
     solution (a ``PayloadSolution`` or a ``DynamicPayloadSolution`` from the state machine's
     ``adopted_solution``; None before one) and ``allowable_error`` (1) the state machine's
-    ``sigma``. The prediction is quasi-static (the payload's weight); a dynamic payload's identified
-    sensor bias is subtracted from the reading first.
+    ``sigma``. A dynamic payload's identified sensor bias is subtracted from the reading first. The
+    prediction is quasi-static (the payload's weight), or, with ``kinematics_K`` connected (9:
+    ``[w_WK_K; alpha_WK_K; a_WKo_K - g_K]``, rad/s, rad/s^2, m/s^2: the station's
+    ``sensor_kinematics``), the Newton-Euler wrench of the payload moving with the sensor
+    (``payload_dynamic.predicted_wrench``): its weight and its inertial force, and the rotational
+    inertia's torque when the payload has one (a ``DynamicPayloadSolution``; a static one is a point
+    mass). A fast move then is not a touch.
 
     A touch is declared when a payload has been adopted and the sample's error under it,
     ``s_t = ||A_t x||^2`` of the payload formulation (``= |f_c|^2/m^2 + |tau_c + f_c x p_KCm|^2``),
@@ -77,6 +82,7 @@ class TouchEstimator(LeafSystem):
         self._X_WK = self.DeclareAbstractInputPort("X_WK", AbstractValue.Make(RigidTransform()))
         self._payload = self.DeclareAbstractInputPort("payload", AbstractValue.Make(None))
         self._sigma = self.DeclareVectorInputPort("allowable_error", 1)
+        self._kinematics = self.DeclareVectorInputPort("kinematics_K", payload_dynamic.KINEMATICS)
         # One estimate per context, shared by all outputs: [touch, p_KP, p_WP, f_env_W, residual].
         self._estimate = self.DeclareCacheEntry(
             "touch estimate",
@@ -102,11 +108,13 @@ class TouchEstimator(LeafSystem):
         R_WK = X_WK.rotation().matrix()
         if payload is not None and payload.mass > 0:
             wrench = self._wrench.Eval(context) - payload.bias  # a dynamic payload's sensor bias
-            residual = wrench - touch.predicted_wrench(payload.mass, payload.p_KCm, R_WK, self._g_W)
+            residual = wrench - self._predicted(context, payload, R_WK)
             out[10:16] = residual
-            f_c = residual[3:]
-            # The static payload formulation's error s_t = ||A_t x||^2 of this sample under the payload.
-            s = SustainableIdentifier.sample_error(build_A(wrench, R_WK, self._g_W), payload.static_x)
+            tau_c, f_c = residual[:3], residual[3:]
+            # The static payload formulation's error s_t = ||A_t x||^2 of this sample under the
+            # payload, from the residual: |f_c|^2 / m^2 + |tau_c + f_c x p_KCm|^2.
+            moment = tau_c + np.cross(f_c, payload.p_KCm)
+            s = float(f_c @ f_c) / payload.mass**2 + float(moment @ moment)
             sigma = float(self._sigma.Eval(context)[0])
             if s > sigma and math.sqrt(f_c @ f_c) >= self._min_force:
                 point = touch.locate_touch(residual, self._shape, self._X_KG)
@@ -116,3 +124,11 @@ class TouchEstimator(LeafSystem):
                     out[4:7] = X_WK.multiply(point.p_KP)
                     out[7:10] = R_WK @ point.f_env_K
         value.set_value(out)
+
+    def _predicted(self, context, payload, R_WK) -> np.ndarray:
+        """The wrench the payload alone would give: quasi-static, or moving (``kinematics_K``)."""
+        if not self._kinematics.HasValue(context):
+            return touch.predicted_wrench(payload.mass, payload.p_KCm, R_WK, self._g_W)
+        I_Cm = getattr(payload, "I_Cm_K", np.zeros((3, 3)))
+        phi = payload_dynamic.inertial_parameters(payload.mass, payload.p_KCm, I_Cm)
+        return payload_dynamic.predicted_wrench(phi, np.zeros(6), self._kinematics.Eval(context))
