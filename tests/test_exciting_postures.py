@@ -14,7 +14,7 @@ from sustain_drake.identification.excitation import information_gains
 from sustain_drake.identification.payload import STANDARD_GRAVITY_W, PostureInformation
 from sustain_drake.station import babbling_joints, babbling_ranges, build_station, load_scenario, sensor_frame
 from sustain_drake.station.scenario import arm_motion
-from sustain_drake.systems.exciting_postures import ExcitingPostures
+from sustain_drake.systems.exciting_postures import Clearance, ExcitingPostures
 from sustain_drake.systems.motion_generator import Pace, move_duration
 from tests.test_payload import make_wrenches
 
@@ -32,6 +32,31 @@ def station_and_chooser():
     chooser = ExcitingPostures(station.GetSubsystemByName("plant"), sensor_frame(station), joints,
                                babbling_ranges(scenario, joints), pace, information, seed=m.seed)
     return scenario, station, joints, pace, information, chooser
+
+
+def _fixed_context(chooser, statistic, q_now, t):
+    context = chooser.CreateDefaultContext()
+    chooser.GetInputPort("statistic").FixValue(context, statistic)
+    chooser.GetInputPort("joint_positions").FixValue(context, q_now)
+    context.SetTime(t)
+    return context
+
+
+def test_a_clearance_no_move_keeps_leaves_the_motion_generator_its_own_goal(station_and_chooser):
+    """With a clearance that every posture breaks (nothing may come within 10 m of the tool), no
+    candidate is chosen: the goal is NaN, which the motion generator answers with its own."""
+    scenario, station, joints, pace, information, _ = station_and_chooser
+    plant = station.GetSubsystemByName("plant")
+    tool = frozenset(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("tool")))
+    chooser = ExcitingPostures(plant, sensor_frame(station), joints, babbling_ranges(scenario, joints), pace,
+                               information, Clearance(station, tool, 10.0), seed=1)
+    q_now = np.array(arm_motion(scenario).initial_posture)
+    context = _fixed_context(chooser, PayloadIdentifier().state, q_now, 0.0)
+    assert np.all(np.isnan(chooser.GetOutputPort("goal").Eval(context)))
+    clear = ExcitingPostures(plant, sensor_frame(station), joints, babbling_ranges(scenario, joints), pace,
+                             information, Clearance(station, tool, 0.02), seed=1)
+    goal = clear.GetOutputPort("goal").Eval(_fixed_context(clear, PayloadIdentifier().state, q_now, 0.0))
+    assert np.all(np.isfinite(goal))
 
 
 def _R_WK(station, joints, q):
@@ -52,10 +77,7 @@ def test_the_chosen_goal_beats_the_babblings_own_per_second(station_and_chooser)
     ident = PayloadIdentifier()
     for w in make_wrenches(0.6, np.array([0.0, 0.0, 0.15]), 60, orientations=np.tile(R0, (60, 1, 1)))[0]:
         ident.add(w, R0)
-    context = chooser.CreateDefaultContext()
-    chooser.GetInputPort("statistic").FixValue(context, ident.state)
-    chooser.GetInputPort("joint_positions").FixValue(context, q_now)
-    context.SetTime(1.83)
+    context = _fixed_context(chooser, ident.state, q_now, 1.83)
     goal = chooser.GetOutputPort("goal").Eval(context).copy()
     lower, upper = babbling_ranges(scenario, joints)
     assert np.all(goal >= lower) and np.all(goal <= upper)
@@ -72,9 +94,11 @@ def test_the_chosen_goal_beats_the_babblings_own_per_second(station_and_chooser)
     assert np.max(np.abs(chooser.GetOutputPort("goal").Eval(context) - goal)) > 1e-3
 
 
-def _identification_time(excite: bool, duration: float) -> float | None:
+def _identification_time(excite: bool, duration: float, seed: int | None = None) -> float | None:
     scenario = load_scenario(SCENARIO)
     scenario.kinesthetic.excite = excite
+    if seed is not None:
+        scenario.motion.seed = seed
     builder = DiagramBuilder()
     station = builder.AddSystem(build_station(scenario))
     handle = kinesthetic.add_to_diagram(builder, station, scenario)
@@ -89,4 +113,12 @@ def test_chosen_postures_identify_the_payload_in_two_rests_where_babbling_takes_
     with the chosen postures it is identified after two shortest moves and their rests."""
     assert _identification_time(False, 5.0) is None
     chosen = _identification_time(True, 5.0)
+    assert chosen is not None and chosen < 4.0
+
+
+def test_chosen_moves_keep_the_tool_off_the_pedestal():
+    """Motion seed 20: the most informative postures tilt the box down onto the arm's pedestal, and
+    the contact's samples, taken for weight, kept the payload unidentified for 16 s. The clearance
+    keeps those moves out: identified after two rests."""
+    chosen = _identification_time(True, 5.0, seed=20)
     assert chosen is not None and chosen < 4.0

@@ -38,10 +38,14 @@ from sustain_drake.station import (
 )
 from sustain_drake.station.scenario import arm_motion, arm_of
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
-from sustain_drake.systems.exciting_postures import ExcitingPostures
+from sustain_drake.systems.exciting_postures import Clearance, ExcitingPostures
 from sustain_drake.systems.motion_generator import Pace
 from sustain_drake.systems.sustainable_identifier_system import SustainableIdentifierSystem
 from sustain_drake.systems.touch_estimator import TouchEstimator
+
+# m: how near the held tool a chosen move may bring anything else (``exciting_postures.PATH_CHECK_STEP``'s
+# 2 cm between checks).
+EXCITE_CLEARANCE = 0.02
 
 
 @dataclass
@@ -108,14 +112,19 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
 
 def add_exciting_postures(builder: DiagramBuilder, station, scenario, ident) -> ExcitingPostures:
     """The babbling's next posture from the static payload identifier's statistic (``kinesthetic.excite``):
-    each rest gives the quasi-static samples of ``motion.dwell`` less the gate's ``window``."""
+    each rest gives the quasi-static samples of ``motion.dwell`` less the gate's ``window``. No chosen
+    move brings the held tool within ``EXCITE_CLEARANCE`` of anything it could touch (the table, the
+    arm's pedestal): its samples would then be contact, not weight."""
     m, config = arm_motion(scenario), scenario.kinesthetic
+    plant = station.GetSubsystemByName("plant")
     joints = babbling_joints(station, scenario)
     rest_samples = max(m.dwell - config.quasi_static.window, config.period) / config.period
     information = payload.PostureInformation(ident.formulation.gravity_W, rest_samples)
+    tool = frozenset(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("tool")))
+    clearance = Clearance(station, tool, EXCITE_CLEARANCE)
     chooser = builder.AddSystem(ExcitingPostures(
-        station.GetSubsystemByName("plant"), sensor_frame(station), joints, babbling_ranges(scenario, joints),
-        Pace(m.max_speed, m.min_duration, m.dwell), information, seed=m.seed))  # fmt: skip
+        plant, sensor_frame(station), joints, babbling_ranges(scenario, joints),
+        Pace(m.max_speed, m.min_duration, m.dwell), information, clearance, seed=m.seed))  # fmt: skip
     chooser.set_name("exciting_postures")
     builder.Connect(ident.GetOutputPort("statistic"), chooser.GetInputPort("statistic"))
     builder.Connect(station.GetOutputPort("joint_positions"), chooser.GetInputPort("joint_positions"))

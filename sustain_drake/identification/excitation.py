@@ -49,10 +49,10 @@ def information_gains(M: np.ndarray, added: Sequence[np.ndarray]) -> np.ndarray:
     return np.array([_scaled_logdet(M + np.asarray(d, dtype=float), scale) - base for d in added])
 
 
-def best_candidate(M: np.ndarray, added: Sequence[np.ndarray], durations: Sequence[float]) -> int:
-    """The index of the candidate with the largest gain per second (``information_gains`` over
-    ``durations``, s > 0: the time its motion and its samples take); the first on a tie. ValueError
-    for no candidate, a length mismatch or a duration that is not > 0."""
+def ranked_candidates(M: np.ndarray, added: Sequence[np.ndarray], durations: Sequence[float]) -> np.ndarray:
+    """The candidates' indices, the largest gain per second first (``information_gains`` over
+    ``durations``, s > 0: the time each one's motion and samples take; ties keep their order).
+    ValueError for no candidate, a length mismatch or a duration that is not > 0."""
     durations = np.asarray(durations, dtype=float)
     if len(added) == 0 or durations.shape != (len(added),):
         raise ValueError(f"need one duration per candidate and at least one, got {len(added)} candidates "
@@ -60,4 +60,9 @@ def best_candidate(M: np.ndarray, added: Sequence[np.ndarray], durations: Sequen
     if not np.all(durations > 0):
         raise ValueError("every candidate's duration must be > 0 s")
     rate = information_gains(M, added) / durations
-    return int(np.argmax(np.where(np.isfinite(rate), rate, -np.inf)))
+    return np.argsort(-np.where(np.isfinite(rate), rate, -np.inf), kind="stable")
+
+
+def best_candidate(M: np.ndarray, added: Sequence[np.ndarray], durations: Sequence[float]) -> int:
+    """The index of the candidate with the largest gain per second (``ranked_candidates``' first)."""
+    return int(ranked_candidates(M, added, durations)[0])

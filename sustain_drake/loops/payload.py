@@ -72,8 +72,8 @@ class KinestheticConfig:
     period: float = 0.01  # s between identifier and state-machine updates: the wrench sensor's 100 Hz
     # when a wrench sample is quasi-static enough to identify from
     quasi_static: QuasiStaticConfig = field(default_factory=QuasiStaticConfig)
-    # N: least residual force of a touch: about twice the largest residual of free motion at
-    # 1 rad/s (1.1 N, the payload's inertial wrench in inertia_touch.yaml)
+    # N: least residual force of a touch: three times the largest residual of free motion at 1 rad/s
+    # (0.65 N in inertia_touch.yaml: the gripper's inertial force, which a static compensation keeps)
     min_touch_force: float = 2.0
     # N: touch points are scored against the true contacts of at least this force
     eval_min_force: float = 5.0

@@ -4,12 +4,30 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from sustain_drake.identification.excitation import best_candidate
+from sustain_drake.identification.excitation import ranked_candidates
 from sustain_drake.systems.motion_generator import Pace, move_duration, shortest_move_reach
+
+# Postures drawn per choice: half the babbling's own, half the shortest moves'.
+NUM_CANDIDATES = 16
+# rad: a chosen move's path is checked every this much of its largest joint's travel (a point 0.4 m
+# out moves 2 cm in it: the clearance's margin).
+PATH_CHECK_STEP = 0.05
+
+
+class Clearance(NamedTuple):
+    """What the chosen moves keep clear: along the move (checked every ``PATH_CHECK_STEP`` of the
+    largest joint's travel), no collision geometry of ``geometries`` (e.g. the held object's) comes
+    within ``margin`` (m) of any other, by the signed distances of the SceneGraph that ``diagram``
+    (holding the plant and its SceneGraph, e.g. the station) wires the plant to."""
+
+    diagram: object
+    geometries: frozenset
+    margin: float
 
 
 class ExcitingPostures(LeafSystem):
@@ -26,14 +44,18 @@ class ExcitingPostures(LeafSystem):
 
     ``statistic`` (the identifier's state, ``[S | n_eff | count]``: a ``SustainableIdentifierSystem``'s
     ``statistic`` output), ``joint_positions`` (n, rad: the arm's encoders). ``goal`` (n, rad): of
-    ``num_candidates`` postures (half drawn uniformly within ``ranges``, the babbling's own
+    ``NUM_CANDIDATES`` (16) postures (half drawn uniformly within ``ranges``, the babbling's own
     distribution; half within the reach of a shortest move around the current posture; from a
     generator seeded with ``(seed, t in ms)``, so runs are reproducible), the one whose samples
-    add the most information per second of motion (``excitation.best_candidate``): the information
+    add the most information per second of motion (``excitation.ranked_candidates``): the information
     of the samples at the posture (``information(statistic, [R_WK])`` gives the statistic's ``M``
     and each candidate's ``dM``, and ``information.num_unknowns`` is the statistic's N: e.g.
     ``payload.PostureInformation``) over the move's duration at
     the babbling's ``pace`` plus its rest (``pace.dwell``).
+
+    With a ``clearance``, the best candidate whose move keeps it (its straight joint-space path,
+    which the motion generator's moves between rests follow) is chosen; when none does, ``goal`` is
+    NaN and the motion generator takes its own random goal.
 
     Computed when evaluated, with no state: a ``MotionGenerator`` evaluates its ``goal`` input once
     per babbling move, so the kinematics of the candidates (``frame``'s orientation in the world,
@@ -42,19 +64,20 @@ class ExcitingPostures(LeafSystem):
     arm's last joint.
     """
 
-    def __init__(self, plant, frame, joints, ranges: tuple, pace: Pace,
-                 information: Callable, seed: int = 0, num_candidates: int = 16):  # fmt: skip
+    def __init__(self, plant, frame, joints, ranges: tuple, pace: Pace, information: Callable,
+                 clearance: Clearance | None = None, seed: int = 0):  # fmt: skip
         super().__init__()
         lower, upper = (np.asarray(r, dtype=float) for r in ranges)
         n = len(joints)
         if lower.shape != (n,) or upper.shape != (n,) or not np.all(lower <= upper):
             raise ValueError(f"ranges must be two length-{n} vectors with lower <= upper")
-        if not (num_candidates >= 1 and pace.max_speed > 0 and pace.min_duration > 0 and pace.dwell >= 0):
-            raise ValueError("num_candidates >= 1, pace.max_speed and pace.min_duration > 0, pace.dwell >= 0")
+        if not (pace.max_speed > 0 and pace.min_duration > 0 and pace.dwell >= 0):
+            raise ValueError("pace.max_speed and pace.min_duration must be > 0, pace.dwell >= 0")
         self._plant, self._frame = plant, frame
         self._positions = [j.position_start() for j in joints]
         self._lower, self._upper, self._pace = lower, upper, pace
-        self._information, self._seed, self._k = information, int(seed), int(num_candidates)
+        self._information, self._clearance, self._seed = information, clearance, int(seed)
+        self._k = NUM_CANDIDATES
         size = int(information.num_unknowns) ** 2 + 2
         self._statistic = self.DeclareVectorInputPort("statistic", size)
         self._q = self.DeclareVectorInputPort("joint_positions", n)
@@ -72,15 +95,38 @@ class ExcitingPostures(LeafSystem):
         near_upper = np.clip(q_now + reach, self._lower, self._upper)
         candidates = np.vstack([rng.uniform(self._lower, self._upper, size=(far, n)),
                                 rng.uniform(near_lower, near_upper, size=(self._k - far, n))])
-        plant_context = self._plant.CreateDefaultContext()
+        root = self._clearance.diagram.CreateDefaultContext() if self._clearance else None
+        plant_context = (self._clearance.diagram.GetMutableSubsystemContext(self._plant, root)
+                         if root is not None else self._plant.CreateDefaultContext())
         q = self._plant.GetPositions(plant_context)
-        rotations = []
-        for goal in candidates:
-            q[self._positions] = goal
+
+        def X_WK(posture):
+            q[self._positions] = posture
             self._plant.SetPositions(plant_context, q)
-            rotations.append(self._frame.CalcPoseInWorld(plant_context).rotation().matrix())
-        M, added = self._information(self._statistic.Eval(context), rotations)
+            return self._frame.CalcPoseInWorld(plant_context)
+
+        M, added = self._information(self._statistic.Eval(context),
+                                     [X_WK(goal).rotation().matrix() for goal in candidates])
         pace = self._pace
         durations = [move_duration(q_now, goal, pace.max_speed, pace.min_duration) + pace.dwell
                      for goal in candidates]
-        output.SetFromVector(candidates[best_candidate(M, added, durations)])
+        # The best first; with a clearance, the best whose path keeps it.
+        for i in ranked_candidates(M, added, durations):
+            if root is None or self._keeps_clear(q_now, candidates[i], X_WK, plant_context):
+                output.SetFromVector(candidates[i])
+                return
+        output.SetFromVector(np.full(n, np.nan))  # none: the motion generator's own random goal
+
+    def _keeps_clear(self, q_now, goal, X_WK, plant_context) -> bool:
+        """Whether the straight joint-space path from ``q_now`` to ``goal`` keeps the clearance."""
+        clear = self._clearance
+        steps = max(1, int(np.ceil(np.max(np.abs(goal - q_now)) / PATH_CHECK_STEP)))
+        query_port = self._plant.get_geometry_query_input_port()
+        for s in np.arange(1, steps + 1) / steps:
+            X_WK(q_now + s * (goal - q_now))
+            query = query_port.Eval(plant_context)
+            for pair in query.ComputeSignedDistancePairwiseClosestPoints(clear.margin):
+                ours = pair.id_A in clear.geometries or pair.id_B in clear.geometries
+                if ours and pair.distance < clear.margin:
+                    return False
+        return True
