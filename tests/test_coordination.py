@@ -182,6 +182,32 @@ def test_loop_converges_detects_a_slip_and_reconverges():
     assert sm.GetOutputPort("pause").Eval(sm_context)[0] == 2  # one pause request per convergence
 
 
+def test_while_observing_the_identifier_solves_nothing_until_read(monkeypatch):
+    """The identifier's solution is a cache entry of its statistic and the state machine reads it
+    only while identifying: after the convergence, samples keep arriving and nothing is solved;
+    a read then solves once, the same solution as a fresh identifier's from the statistic."""
+    solves = []
+    original = EyeToHandFormulation.solve
+    monkeypatch.setattr(EyeToHandFormulation, "solve",
+                        lambda self, identifier: solves.append(1) or original(self, identifier))
+    truth, diagram, ident, sm = build(t_slip=100.0)
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(4.0)
+    sm_context = sm.GetMyContextFromRoot(simulator.get_context())
+    assert [e.kind for e in sm.events(sm_context)] == [coordination.CONVERGED]
+    before = len(solves)
+    simulator.AdvanceTo(7.0)  # 30 more samples, observed
+    assert len(solves) == before
+    ident_context = ident.GetMyContextFromRoot(simulator.get_context())
+    assert ident.GetOutputPort("verdict").Eval(ident_context)[1] > 60  # the samples went in
+    assert len(solves) == before + 1
+    x = ident.GetOutputPort("x").Eval(ident_context)
+    assert len(solves) == before + 1  # one solve serves every output
+    fresh = EyeToHandFormulation().make_identifier()
+    fresh.set_state(ident.GetOutputPort("statistic").Eval(ident_context))
+    np.testing.assert_array_equal(x, original(EyeToHandFormulation(), fresh).x)
+
+
 def test_a_stale_solution_after_a_detection_is_not_adopted():
     # The identifier applies the reset one update after the detection: the solution seen on the
     # next tick is still the old converged one (500 samples), and must not be adopted again.

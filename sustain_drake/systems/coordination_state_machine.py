@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
@@ -56,7 +58,9 @@ class CoordinationStateMachine(LeafSystem):
     ``adopt_refinements``, adopted refinement, with its time).
 
     Every ``period`` seconds (a periodic unrestricted update, at the identifier's rate) it applies
-    ``coordination.step``, with the solution's ``num_samples``: after a change detection, a solution
+    ``coordination.step``, with the solution's ``num_samples``; it reads ``solution`` only while
+    identifying or with the rule's ``adopt_refinements`` (observing, the rule needs the observation
+    alone, so a lazily solving identifier solves nothing): after a change detection, a solution
     with more samples than arrived since (the identifier's reset takes effect one update later) is
     stale and not adopted. State: the rule's vector and the adopted ``x`` (discrete), the adopted
     solution and the event log (abstract).
@@ -120,7 +124,6 @@ class CoordinationStateMachine(LeafSystem):
         return context.get_abstract_state(self._events).get_value()
 
     def _update(self, context, state) -> None:
-        solution = self._solution_in.Eval(context)
         sample_count, sample_error = self._observation.Eval(context)
         optional = {}  # the connected optional inputs, as ``coordination.step``'s keyword arguments
         if self._camera_motion.HasValue(context):
@@ -128,10 +131,18 @@ class CoordinationStateMachine(LeafSystem):
             optional = {"camera_moving": bool(moving > 0.5), "camera_moves": int(moves)}
         if self._body_changes.HasValue(context):
             optional["body_changes"] = int(self._body_changes.Eval(context)[0])
+        solution = None
+        if self.mode(context) == coordination.OBSERVE and not self._rule.adopt_refinements:
+            # Observing without refinements, the rule reads only the observation: nothing is solved.
+            verdict = dict(converged=False, expected_mse=math.inf, num_samples=None, refinement=0)
+        else:
+            solution = self._solution_in.Eval(context)
+            verdict = dict(converged=solution.verdict.converged, expected_mse=solution.expected_mse,
+                           num_samples=int(solution.num_samples),
+                           refinement=int(getattr(solution, "refinement", 0)))
         new, event = coordination.step(
-            self._vector(context), self._rule, context.get_time(), solution.verdict.converged,
-            solution.expected_mse, int(sample_count), float(sample_error), int(solution.num_samples),
-            int(getattr(solution, "refinement", 0)), **optional,
+            self._vector(context), self._rule, context.get_time(), sample_count=int(sample_count),
+            sample_error=float(sample_error), **verdict, **optional,
         )  # fmt: skip
         state.get_mutable_discrete_state(self._state).set_value(new)
         if event is not None:

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector, LeafSystem, ValueProducer
 
 from sustain_drake.identification import (
     dynamic_observability,
@@ -225,7 +225,7 @@ _LAST_RESET, _SAMPLE_COUNT, _SAMPLE_ERROR = range(3)
 
 
 class SustainableIdentifierSystem(LeafSystem):
-    """Accumulates samples in the constant-memory statistic of §3.1 and solves it every sample.
+    """Accumulates samples in the constant-memory statistic of §3.1 and solves it when read.
 
     .. pydrake_system::
 
@@ -250,7 +250,8 @@ class SustainableIdentifierSystem(LeafSystem):
 
     Every ``period`` seconds (a periodic unrestricted update) it reads one sample, adds it unless
     ``sample_valid`` (1: > 0.5 is valid; unconnected = always valid) says not or it is not
-    finite, and solves.
+    finite. The solution (every output but ``observation`` and ``statistic``) is solved from the
+    statistic when first read after a change, so a sample nobody reads a solution of costs no solve.
 
     - ``reset`` (1) is edge-triggered: whenever its value differs from the last one seen, the
       statistic is cleared before the sample is added (a state machine counts resets up).
@@ -265,7 +266,7 @@ class SustainableIdentifierSystem(LeafSystem):
       e.g. for an ``ExcitingPostures``).
 
     State: discrete group 0 is the statistic (N^2 + 2), group 1 ``[last reset value,
-    sample_count, s_t]``; the solution is abstract state.
+    sample_count, s_t]``; the solution is a cache entry of the statistic.
     """
 
     def __init__(self, formulation, period: float = 1.0 / 30.0):
@@ -282,7 +283,13 @@ class SustainableIdentifierSystem(LeafSystem):
         empty = formulation.make_identifier()
         self._statistic = self.DeclareDiscreteState(empty.state)
         self._book = self.DeclareDiscreteState(np.zeros(3))
-        self._solution = self.DeclareAbstractState(AbstractValue.Make(formulation.solve(empty)))
+        # The solution is a function of the statistic, solved when a reader asks for it (an
+        # observing state machine with a reference estimate never does).
+        self._solution = self.DeclareCacheEntry(
+            "solution",
+            ValueProducer(allocate=lambda: AbstractValue.Make(formulation.solve(empty)), calc=self._solve),
+            {self.discrete_state_ticket(self._statistic)},
+        )
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
         declare_solution_outputs(self, n, self.solution)
@@ -291,7 +298,10 @@ class SustainableIdentifierSystem(LeafSystem):
             lambda c, o: o.SetFromVector(c.get_discrete_state(self._book).value()[_SAMPLE_COUNT:]),
             prerequisites_of_calc={self.all_state_ticket()},
         )  # fmt: skip
-        self.DeclareStateOutputPort("solution", self._solution)
+        self.DeclareAbstractOutputPort(
+            "solution", lambda: AbstractValue.Make(formulation.solve(empty)),
+            lambda c, o: o.set_value(self.solution(c)), prerequisites_of_calc={self._solution.ticket()},
+        )  # fmt: skip
         self.DeclareStateOutputPort("statistic", self._statistic)
         formulation.declare_outputs(self, self.solution)
 
@@ -300,8 +310,13 @@ class SustainableIdentifierSystem(LeafSystem):
         return self._formulation
 
     def solution(self, context):
-        """The latest solution held in ``context``."""
-        return context.get_abstract_state(self._solution).get_value()
+        """The solution of the statistic held in ``context`` (solved on the first call after a change)."""
+        return self._solution.Eval(context)
+
+    def _solve(self, context, value) -> None:
+        identifier = self._formulation.make_identifier()
+        identifier.set_state(context.get_discrete_state(self._statistic).value())
+        value.set_value(self._formulation.solve(identifier))
 
     def _update(self, context, state) -> None:
         book = context.get_discrete_state(self._book).value().copy()
@@ -328,7 +343,6 @@ class SustainableIdentifierSystem(LeafSystem):
                 book[_SAMPLE_ERROR] = _finite(error)
         state.get_mutable_discrete_state(self._statistic).set_value(identifier.state)
         state.get_mutable_discrete_state(self._book).set_value(book)
-        state.get_mutable_abstract_state(self._solution).set_value(self._formulation.solve(identifier))
 
 
 
