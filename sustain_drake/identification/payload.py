@@ -42,6 +42,8 @@ from sustain_drake.identification.errors import (
     not_a_rotation,
     out_array,
     real_array,
+    real_number,
+    rotation,
 )
 from sustain_drake.identification.observability import _judge_payload
 from sustain_drake.identification.rotation import _skew
@@ -104,21 +106,33 @@ def posture_information(state: np.ndarray, R_WK_candidates, g_W: np.ndarray, sam
     g_W``) with the mass the statistic implies, ``m^2 = S[0, 0] / (n_eff |g_W|^2)`` (each
     quasi-static sample adds ``|R_WK f_K|^2 = m^2 |g_W|^2`` to ``S[0, 0]``), or 1 kg before any
     sample: only ``f_K``'s direction, ``R_WK^T g_W``, moves ``dM``, and its scale must match ``M``'s.
-    The torque column is the measurement's, not an unknown's, so it needs no prediction."""
-    state = np.asarray(state, dtype=float)
+    The torque column is the measurement's, not an unknown's, so it needs no prediction.
+    IdentificationError unless ``state`` is a real vector of 27, ``R_WK_candidates`` rotation
+    matrices (k x 3 x 3), ``g_W`` a finite 3-vector and ``samples`` a number > 0."""
     n2 = N_UNKNOWNS * N_UNKNOWNS
+    state = real_array("state", state, (n2 + 2,))
+    rotations = real_array("R_WK_candidates", R_WK_candidates, (None, 3, 3),
+                           what="rotation matrices (k x 3 x 3)")
+    g_W = real_array("g_W", g_W, VECTOR3)
+    samples = _positive_samples(samples)
     S = state[:n2].reshape(N_UNKNOWNS, N_UNKNOWNS)
     n_eff = float(state[n2])
-    g_W = np.asarray(g_W, dtype=float)
-    m = math.sqrt(S[0, 0] / (n_eff * float(g_W @ g_W))) if n_eff > 0 and S[0, 0] > 0 else 1.0
+    m = math.sqrt(S[0, 0] / (n_eff * float(g_W @ g_W))) if n_eff > 0 and S[0, 0] > 0 and g_W.any() else 1.0
     unknowns = slice(0, N_UNKNOWNS - 1)
     added = []
-    for R_WK in R_WK_candidates:
-        R_WK = np.asarray(R_WK, dtype=float)
+    for R_WK in rotations:
+        R_WK = rotation("R_WK_candidates", R_WK)
         wrench = np.concatenate([np.zeros(3), -m * (R_WK.T @ g_W)])
         Phi = _build_A(wrench, R_WK, g_W)[:, unknowns]
         added.append(samples * (Phi.T @ Phi))
     return S[unknowns, unknowns].copy(), added
+
+
+def _positive_samples(samples) -> float:
+    samples = real_number("samples", samples, what="a number > 0")
+    if not samples > 0:
+        raise IdentificationError(f"samples must be a number > 0, got {samples}")
+    return samples
 
 
 @dataclass(frozen=True)
@@ -130,6 +144,10 @@ class PostureInformation:
     g_W: np.ndarray
     samples: float
     num_unknowns: ClassVar[int] = N_UNKNOWNS
+
+    def __post_init__(self):
+        object.__setattr__(self, "g_W", real_array("g_W", self.g_W, VECTOR3))
+        object.__setattr__(self, "samples", _positive_samples(self.samples))
 
     def __call__(self, state, R_WK_candidates):
         return posture_information(state, R_WK_candidates, self.g_W, self.samples)
