@@ -202,3 +202,17 @@ def test_an_output_under_a_file_is_refused_before_running(tmp_path, capsys):
 def test_shipped_sweep_files_load(name):
     sweep = load_sweep(SWEEPS / name)
     assert len(sweep.cells) >= 2
+
+
+def test_a_closed_output_pipe_ends_the_command_quietly(capfd, monkeypatch):
+    """``sustain-drake sweep FILE --list | head -1``: the reader closes the pipe, and the command
+    stops with the shell's SIGPIPE status and no traceback."""
+    from sustain_drake.cli import sweep as sweep_cli
+
+    def closed(*args, **kwargs):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(sweep_cli, "print", closed, raising=False)
+    sweep_file = Path(__file__).resolve().parents[1] / "diagrams" / "sweeps" / "kinesthetic_seeds.yaml"
+    assert main(["sweep", str(sweep_file), "--list"]) == 141
+    assert capfd.readouterr().err == ""

@@ -281,13 +281,13 @@ class SustainableIdentifierSystem(LeafSystem):
         self._reset = self.DeclareVectorInputPort("reset", 1)
         self._reference = self.DeclareVectorInputPort("reference_x", n)
         empty = formulation.make_identifier()
+        blank = formulation.solve(empty)  # immutable: every context's first value shares it
         self._statistic = self.DeclareDiscreteState(empty.state)
         self._book = self.DeclareDiscreteState(np.zeros(3))
         # The solution is a function of the statistic, solved when a reader asks for it (an
         # observing state machine with a reference estimate never does).
         self._solution = self.DeclareCacheEntry(
-            "solution",
-            ValueProducer(allocate=lambda: AbstractValue.Make(formulation.solve(empty)), calc=self._solve),
+            "solution", ValueProducer(allocate=lambda: AbstractValue.Make(blank), calc=self._solve),
             {self.discrete_state_ticket(self._statistic)},
         )
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
@@ -299,7 +299,7 @@ class SustainableIdentifierSystem(LeafSystem):
             prerequisites_of_calc={self.all_state_ticket()},
         )  # fmt: skip
         self.DeclareAbstractOutputPort(
-            "solution", lambda: AbstractValue.Make(formulation.solve(empty)),
+            "solution", lambda: AbstractValue.Make(blank),
             lambda c, o: o.set_value(self.solution(c)), prerequisites_of_calc={self._solution.ticket()},
         )  # fmt: skip
         self.DeclareStateOutputPort("statistic", self._statistic)
