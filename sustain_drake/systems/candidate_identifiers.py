@@ -223,6 +223,11 @@ class CandidateIdentifiers(LeafSystem):
     def params(self) -> CandidateParams:
         return self._params
 
+    @property
+    def criteria(self):
+        """The ``ConvergenceCriteria`` each candidate's identifier is judged by."""
+        return self._formulation.criteria
+
     def bank(self, context) -> CandidateBank:
         return context.get_abstract_state(self._bank).get_value().value
 

@@ -15,7 +15,7 @@ from sustain_drake.identification.eye_to_hand import (
     build_A,
     pack_x,
 )
-from sustain_drake.identification.eye_to_hand_points import refine_joint, rotation_levers
+from sustain_drake.identification.eye_to_hand_points import joint_covariance, refine_joint, rotation_levers
 from sustain_drake.identification.sustainable_identifier import SustainableIdentifier
 
 
@@ -219,3 +219,24 @@ def smallest_rotation_lever(statistics: list, estimate: EyeToHandEstimate | None
         return 0.0
     P = [best_p_HP_given_camera(s, estimate.R_WC, estimate.p_WC) for s in statistics]
     return float(rotation_levers([S_of(s) for s in statistics], estimate.R_WC, estimate.p_WC, P)[0])
+
+
+def joint_camera_sd(statistics: list, estimate: EyeToHandEstimate | None, params: CandidateParams):
+    """The 1 sd of the camera that ``joint_refined`` fitted to ``statistics`` (its returned points,
+    the leader's first) at ``estimate``: ``(position m, rotation rad)``, each the RMS of the 3-D
+    error, from the joint fit's Gauss-Newton covariance (``eye_to_hand_points.joint_covariance``,
+    each point with its own ``p_HP`` under that camera and the fit's weights). None without an
+    estimate or when the fit is undetermined. A measure of the views themselves: with six or more
+    points it held the camera's error within about 1.4 sd on ``hand_eye.yaml``
+    (docs/hand_eye_record.md, "The joint fit's own uncertainty")."""
+    if estimate is None:
+        return None
+    fits = [own_fit(s, estimate.R_WC, estimate.p_WC) for s in statistics]
+    P = np.array([p_HP for p_HP, _ in fits])
+    weights = (inverse_variance_weights(np.array([mse for _, mse in fits])) if params.joint_weighted
+               else np.ones(len(P)))
+    covariance = joint_covariance([S_of(s) for s in statistics], estimate.R_WC, estimate.p_WC, P, weights)
+    if covariance is None:
+        return None
+    d = np.diagonal(covariance)
+    return math.sqrt(float(d[3:6].sum())), math.sqrt(float(d[0:3].sum()))

@@ -1,0 +1,52 @@
+"""``fitting.joint_camera_sd``: the joint fit's own 1 sd of the camera (issue 25's verdict on the views)."""
+
+from __future__ import annotations
+
+import numpy as np
+from eye_to_hand_data import make_points, make_truth
+
+from sustain_drake.identification import EyeToHandIdentifier
+from sustain_drake.identification import eye_to_hand_points as points
+from sustain_drake.identification.candidates import CandidateParams
+from sustain_drake.identification.candidates.fitting import joint_camera_sd
+from sustain_drake.identification.eye_to_hand import EyeToHandEstimate, pack_x
+
+P_HP = np.array([[0.05, 0.02, 0.12], [-0.08, 0.04, 0.10], [0.0, -0.09, 0.15]])  # m, in the hand
+PARAMS = CandidateParams(joint=True, joint_weighted=True)
+
+
+def statistics_and_fit(n: int, seed: int):
+    truth = make_truth(6)
+    data, X_WH = make_points(truth, P_HP, n, noise_m=1e-3, seed=seed)
+    states = []
+    for samples, p_C in data.values():
+        identifier = EyeToHandIdentifier()
+        for c, X in zip(p_C, X_WH[samples], strict=True):
+            identifier.add(c, X[:3, :3], X[:3, 3])
+        states.append(identifier.state.copy())
+    S_list = [identifier_S(s) for s in states]
+    R, p_WC, P, _ = points.refine_joint_weighted(S_list, truth.X_WC[:3, :3], truth.X_WC[:3, 3])
+    estimate = EyeToHandEstimate(R, p_WC, P[0], pack_x(R, p_WC, P[0]), 0.0)
+    return truth, states, estimate
+
+
+def identifier_S(state):
+    identifier = EyeToHandIdentifier()
+    identifier.set_state(state)
+    return identifier.core.S
+
+
+def test_the_camera_sd_falls_as_one_over_the_root_of_the_samples_and_covers_the_error():
+    sd = {}
+    for n in (100, 400):
+        truth, states, estimate = statistics_and_fit(n, seed=n)
+        sd[n] = joint_camera_sd(states, estimate, PARAMS)
+        assert sd[n] is not None and all(np.isfinite(sd[n])) and min(sd[n]) > 0.0
+        error = float(np.linalg.norm(estimate.p_WC - truth.X_WC[:3, 3]))
+        assert error <= 4.0 * sd[n][0]  # 1 mm noise per axis: the fit's own figure holds the error
+    assert 1.6 <= sd[100][0] / sd[400][0] <= 2.5 and 1.6 <= sd[100][1] / sd[400][1] <= 2.5
+
+
+def test_no_sd_without_an_estimate():
+    _, states, _ = statistics_and_fit(50, seed=1)
+    assert joint_camera_sd(states, None, PARAMS) is None
