@@ -16,16 +16,18 @@ from __future__ import annotations
 
 import argparse
 import math
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
 
-from sustain_drake.experiments.run import simulate_scenario
+from sustain_drake.experiments import hand_eye
 from sustain_drake.identification.candidates.admission import identifier_of
 from sustain_drake.identification.candidates.fitting import joint_camera_sd, joint_refined
-from sustain_drake.station import load_scenario
+from sustain_drake.identification.rotation import rotation_angle
+from sustain_drake.station import build_station, load_scenario
 from sustain_drake.station.scenario_files import with_seed
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,65 +35,50 @@ MIN_SAMPLES = 40  # samples before a candidate is looked at (the TLS has no bran
 SHOWN = (100, 150, 200, 250)  # samples of the rows printed
 
 
-def _find(system, name: str):
-    """The subsystem called ``name`` anywhere in the diagram ``system`` (None if there is none)."""
-    for s in system.GetSystems():
-        if s.get_name() == name:
-            return s
-        if hasattr(s, "GetSystems"):
-            found = _find(s, name)
-            if found is not None:
-                return found
-    return None
-
-
-def _angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
-    return math.degrees(math.acos(min(1.0, max(-1.0, (np.trace(R_a.T @ R_b) - 1.0) / 2.0))))
-
-
-class ViewUncertainty:
-    """``simulate_scenario``'s ``on_step``: until the first adoption, every ``every`` s, the row of
-    the candidate with the most samples (reads only)."""
-
-    def __init__(self, every: float):
-        self.every, self.next, self.rows, self.systems = every, 0.0, [], None
-
-    def __call__(self, t: float, simulator) -> None:
-        if t + 1e-9 < self.next:
-            return
-        self.next = t + self.every
-        diagram, root = simulator.get_system(), simulator.get_context()
-        if self.systems is None:
-            self.systems = _find(diagram, "candidate_identifiers"), _find(diagram, "true_X_WC_matrix")
-        candidates, truth = self.systems
-        bank = candidates.bank(candidates.GetMyContextFromRoot(root))
-        ready = [c for c in bank.candidates if c.solution.num_samples >= MIN_SAMPLES]
-        if bank.adoptions or not ready:
-            return
-        best = max(ready, key=lambda c: c.solution.num_samples)
-        solution = identifier_of(best, candidates.criteria, 1.0).solve(refine_estimate=True)
-        joint, statistics = joint_refined(replace(best, solution=solution), bank.candidates, bank.archive,
-                                          candidates.params)
-        estimate = joint.solution.estimate
-        sd = joint_camera_sd(statistics, estimate, candidates.params)
-        if estimate is None or sd is None:
-            return
-        X_WC = truth.get_output_port().Eval(truth.GetMyContextFromRoot(root)).reshape(4, 4)
-        self.rows.append({"time": t, "samples": solution.num_samples, "points": len(statistics),
-                          "error_mm": 1e3 * float(np.linalg.norm(estimate.p_WC - X_WC[:3, 3])),
-                          "error_deg": _angle_deg(estimate.R_WC, X_WC[:3, :3]),
-                          "sd_mm": 1e3 * sd[0], "sd_deg": math.degrees(sd[1])})
+def row(t: float, candidates, bank, X_WC) -> dict | None:
+    """The row at ``t``: the candidate with the most samples (at least ``MIN_SAMPLES``) refined and
+    joined with the points it explains, its camera's error against ``X_WC`` (a RigidTransform) and
+    its 1 sd; None before such a candidate or when the joint fit is undetermined."""
+    ready = [c for c in bank.candidates if c.solution.num_samples >= MIN_SAMPLES]
+    if not ready:
+        return None
+    best = max(ready, key=lambda c: c.solution.num_samples)
+    solution = identifier_of(best, candidates.criteria, 1.0).solve(refine_estimate=True)
+    joint, statistics = joint_refined(replace(best, solution=solution), bank.candidates, bank.archive,
+                                      candidates.params)
+    estimate = joint.solution.estimate
+    sd = joint_camera_sd(statistics, estimate, candidates.params)
+    if sd is None:
+        return None
+    return {"time": t, "samples": solution.num_samples, "points": len(statistics),
+            "error_mm": 1e3 * float(np.linalg.norm(estimate.p_WC - X_WC.translation())),
+            "error_deg": math.degrees(rotation_angle(estimate.R_WC.T @ X_WC.rotation().matrix())),
+            "sd_mm": 1e3 * sd[0], "sd_deg": math.degrees(sd[1])}
 
 
 def run(seed: int | None, duration: float, every: float) -> list[dict]:
+    """One run of ``hand_eye.yaml`` (``seed``: the motion's, None: the scenario's) to ``duration`` s
+    or its first adoption: the rows every ``every`` s."""
     scenario = load_scenario(ROOT / "diagrams" / "hand_eye.yaml", "hand_eye")
     if seed is not None:
         scenario = with_seed(scenario, seed)
-    monitor = ViewUncertainty(every)
-    with tempfile.TemporaryDirectory() as out:
-        simulate_scenario(scenario, out, label="view_uncertainty", duration=duration, log_rate=1.0,
-                          replay=False, on_step=monitor)
-    return monitor.rows
+    builder = DiagramBuilder()
+    station = builder.AddSystem(build_station(scenario))
+    candidates = hand_eye.add_to_diagram(builder, station, scenario, None).candidates
+    simulator = Simulator(builder.Build())
+    root = simulator.get_context()
+    rows, t = [], 0.0
+    while t < duration - 1e-9:
+        t = min(t + every, duration)
+        simulator.AdvanceTo(t)
+        bank = candidates.bank(candidates.GetMyContextFromRoot(root))
+        if bank.adoptions:
+            break
+        X_WC = station.GetOutputPort("true_X_WC").Eval(station.GetMyContextFromRoot(root))
+        found = row(t, candidates, bank, X_WC)
+        if found is not None:
+            rows.append(found)
+    return rows
 
 
 def main() -> None:

@@ -8,7 +8,7 @@ from eye_to_hand_data import make_points, make_truth
 from sustain_drake.identification import EyeToHandIdentifier
 from sustain_drake.identification import eye_to_hand_points as points
 from sustain_drake.identification.candidates import CandidateParams
-from sustain_drake.identification.candidates.fitting import joint_camera_sd
+from sustain_drake.identification.candidates.fitting import S_of, joint_camera_sd
 from sustain_drake.identification.eye_to_hand import EyeToHandEstimate, pack_x
 
 P_HP = np.array([[0.05, 0.02, 0.12], [-0.08, 0.04, 0.10], [0.0, -0.09, 0.15]])  # m, in the hand
@@ -24,16 +24,10 @@ def statistics_and_fit(n: int, seed: int):
         for c, X in zip(p_C, X_WH[samples], strict=True):
             identifier.add(c, X[:3, :3], X[:3, 3])
         states.append(identifier.state.copy())
-    S_list = [identifier_S(s) for s in states]
+    S_list = [S_of(s) for s in states]
     R, p_WC, P, _ = points.refine_joint_weighted(S_list, truth.X_WC[:3, :3], truth.X_WC[:3, 3])
     estimate = EyeToHandEstimate(R, p_WC, P[0], pack_x(R, p_WC, P[0]), 0.0)
     return truth, states, estimate
-
-
-def identifier_S(state):
-    identifier = EyeToHandIdentifier()
-    identifier.set_state(state)
-    return identifier.core.S
 
 
 def test_the_camera_sd_falls_as_one_over_the_root_of_the_samples_and_covers_the_error():

@@ -174,10 +174,7 @@ def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tu
         statistics = [c.statistic for c in [best] + members]
         if params.stitch_radius > 0:
             statistics = [s for _, s in stitch(statistics, R, p_WC, params.stitch_radius)]
-        fits = [own_fit(s, R, p_WC) for s in statistics]
-        P = np.array([p_HP for p_HP, _ in fits])
-        weights = (inverse_variance_weights(np.array([mse for _, mse in fits])) if params.joint_weighted
-                   else np.ones(len(P)))
+        P, weights = _points_and_weights(statistics, R, p_WC, params)
         refined = refine_joint([w * S_of(s) for w, s in zip(weights, statistics, strict=True)], R, p_WC, P)
         if refined is None:
             return best, [best.statistic]
@@ -205,6 +202,16 @@ def first_choice(members: list, best: Candidate) -> list:
     return members
 
 
+def _points_and_weights(statistics: list, R_WC: np.ndarray, p_WC: np.ndarray, params: CandidateParams):
+    """Each point's own ``p_HP`` under the camera ``(R_WC, p_WC)`` (K x 3) and its weight in the joint
+    fit (``joint_weighted``: ``inverse_variance_weights`` of their own fits; else all 1)."""
+    fits = [own_fit(s, R_WC, p_WC) for s in statistics]
+    P = np.array([p_HP for p_HP, _ in fits])
+    weights = (inverse_variance_weights(np.array([mse for _, mse in fits])) if params.joint_weighted
+               else np.ones(len(P)))
+    return P, weights
+
+
 def inverse_variance_weights(mse: np.ndarray) -> np.ndarray:
     """``joint_weighted``: each point's weight, the inverse of its own mean squared error (``own_fit``
     under the joint camera), scaled to a mean of 1."""
@@ -226,15 +233,11 @@ def joint_camera_sd(statistics: list, estimate: EyeToHandEstimate | None, params
     the leader's first) at ``estimate``: ``(position m, rotation rad)``, each the RMS of the 3-D
     error, from the joint fit's Gauss-Newton covariance (``eye_to_hand_points.joint_covariance``,
     each point with its own ``p_HP`` under that camera and the fit's weights). None without an
-    estimate or when the fit is undetermined. A measure of the views themselves: with six or more
-    points it held the camera's error within about 1.4 sd on ``hand_eye.yaml``
-    (docs/hand_eye_record.md, "The joint fit's own uncertainty")."""
+    estimate or when the fit is undetermined. A measure of the views themselves, not a count of
+    samples (docs/hand_eye_record.md, "The joint fit's own uncertainty")."""
     if estimate is None:
         return None
-    fits = [own_fit(s, estimate.R_WC, estimate.p_WC) for s in statistics]
-    P = np.array([p_HP for p_HP, _ in fits])
-    weights = (inverse_variance_weights(np.array([mse for _, mse in fits])) if params.joint_weighted
-               else np.ones(len(P)))
+    P, weights = _points_and_weights(statistics, estimate.R_WC, estimate.p_WC, params)
     covariance = joint_covariance([S_of(s) for s in statistics], estimate.R_WC, estimate.p_WC, P, weights)
     if covariance is None:
         return None
