@@ -209,13 +209,44 @@ def _spread_off_line(covariance: np.ndarray) -> float:
 class CameraAfterTurn(NamedTuple):
     """``camera_after_turn``'s answer: the camera (``R_WC``, ``p_WC``), the anchors' RMS direction
     misfit (rad) and how many anchors fitted; ``scene_shift``: the position is the static scene's
-    (from the anchors' depth on both sides of the move), not the old one left where it was."""
+    (from the anchors' depth on both sides of the move), not the old one left where it was;
+    ``rotation_sd``: the turn's 1 sd about its worst-determined axis (rad, ``turn_rotation_sd``)."""
 
     R_WC: np.ndarray
     p_WC: np.ndarray
     rms_angle: float
     num_anchors: int
     scene_shift: bool
+    rotation_sd: float = 0.0
+
+
+# count: the fewest anchors a turn is fitted to. Two bearings fix a rotation; the misfit test (three
+# times the median misfit) leaves out the anchors on moving things only while they are fewer than
+# half, so five anchors stand two such and still over-determine the turn with three.
+MIN_TURN_ANCHORS = 5
+# rad: the largest 1 sd of a turn that is used. The camera found after a turn keeps the turn's
+# rotation (the tool points place it, they do not turn it), so 3 sd of the turn stay within the
+# hand-eye target for an adopted camera's rotation, 0.2 deg.
+MAX_TURN_ROTATION_SD = math.radians(0.2) / 3.0
+
+
+def turn_rotation_sd(c: np.ndarray, misfit: np.ndarray) -> float:
+    """1 sd (rad) of a rotation fitted to unit directions ``c`` (K x 3, before) by their misfit
+    angles ``misfit`` (K, rad) after it, about its worst-determined axis: a small turn ``d`` moves a
+    direction by ``d x c``, seen only across ``c``, so the information is ``sum (I - c c^T) / s^2``
+    with the per-axis direction noise ``s^2 = sum misfit^2 / (2 K - 3)`` (two equations per
+    anchor, three unknowns). Anchors bunched at the image centre leave the turn about the optical
+    axis weakly determined: that axis's sd is the one returned. inf with fewer than 2 anchors or a
+    singular information (all directions parallel)."""
+    k = c.shape[0]
+    if k < 2:
+        return math.inf
+    information = k * np.eye(3) - c.T @ c
+    smallest = float(np.linalg.eigvalsh(information)[0])
+    if not smallest > 1e-12 * k:
+        return math.inf
+    variance = float(misfit @ misfit) / max(2 * k - 3, 1)
+    return math.sqrt(variance / smallest)
 
 
 def _robust_scale(errors: np.ndarray) -> float:
@@ -277,8 +308,9 @@ def _anchors(name: str, value, bearings: bool) -> np.ndarray:
 
 
 def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: np.ndarray,
-                      b1: np.ndarray, S_list: list[np.ndarray], p_HP: np.ndarray, min_points: int = 10,
-                      iterations: int = 4, q1: np.ndarray | None = None):  # fmt: skip
+                      b1: np.ndarray, S_list: list[np.ndarray], p_HP: np.ndarray,
+                      min_points: int = MIN_TURN_ANCHORS, iterations: int = 4, q1: np.ndarray | None = None,
+                      max_rotation_sd: float = MAX_TURN_ROTATION_SD):  # fmt: skip
     """The camera after a move (beyond the paper) from two things that the move left as they were:
     the static scene (its rotation) and the held tool (its position).
 
@@ -302,12 +334,15 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
     find the tool's points again). Anchors
     whose direction misfits by more than three times the median are left out (a feature of the
     moving arm, a track that jumped), each fit. Returns a ``CameraAfterTurn``, or None with fewer
-    than ``min_points`` anchors left.
+    than ``min_points`` anchors left (``MIN_TURN_ANCHORS``) or a turn whose 1 sd
+    (``turn_rotation_sd``, from the anchors' own misfits and their spread) exceeds
+    ``max_rotation_sd`` (``MAX_TURN_ROTATION_SD``).
 
     IdentificationError unless ``R_WC0`` is a finite 3 x 3 matrix, ``p_WC0`` a finite 3-vector,
     ``b0`` and ``b1`` K x 3 arrays of finite non-zero bearings, ``q0`` (and ``q1`` unless None or
     empty) a K x 3 array whose finite rows are non-zero, ``S_list`` a list of finite 16 x 16
-    statistics with as many finite ``p_HP`` points, and ``min_points``, ``iterations`` integers >= 1."""
+    statistics with as many finite ``p_HP`` points, ``min_points``, ``iterations`` integers >= 1 and
+    ``max_rotation_sd`` a number >= 0 (inf: no limit)."""
     R_WC0, p_WC0 = real_array("R_WC0", R_WC0, MATRIX3), real_array("p_WC0", p_WC0, VECTOR3)
     b0, b1 = _anchors("b0", b0, bearings=True), _anchors("b1", b1, bearings=True)
     q0 = _anchors("q0", q0, bearings=False)
@@ -320,6 +355,9 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
     S_list = _statistics(S_list)
     p_HP = _points("p_HP", p_HP, len(S_list))
     min_points, iterations = integer("min_points", min_points, 1), integer("iterations", iterations, 1)
+    max_rotation_sd = real_number("max_rotation_sd", max_rotation_sd, finite=False, what="a number >= 0")
+    if not max_rotation_sd >= 0.0:
+        raise IdentificationError(f"max_rotation_sd must be a number >= 0, got {max_rotation_sd}")
     far = ~np.all(np.isfinite(q0), axis=1)
     deep = ~far & np.all(np.isfinite(q1), axis=1)  # depth on both sides
     P, n = _known_points_statistic(S_list, p_HP)
@@ -347,8 +385,11 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
             R_C0C1, p_C0C1 = _scene_registration(R_C0C1, p_C0C1, b0, q0, b1, q1, far, inliers, used)
             R_WC, from_scene = R_WC0 @ R_C0C1, True
         p_WC = p_WC0 + R_WC0 @ p_C0C1
+    rotation_sd = turn_rotation_sd(c[inliers], angle[inliers])
+    if not rotation_sd <= max_rotation_sd:
+        return None
     rms = math.sqrt(float(np.mean(angle[inliers] ** 2)))
-    return CameraAfterTurn(R_WC, p_WC, rms, int(np.count_nonzero(inliers)), from_scene)
+    return CameraAfterTurn(R_WC, p_WC, rms, int(np.count_nonzero(inliers)), from_scene, rotation_sd)
 
 
 # ---- several points at once from recorded data (batch.calibrate_eye_to_hand_points) --------------
