@@ -307,16 +307,27 @@ def _anchors(name: str, value, bearings: bool) -> np.ndarray:
     return A
 
 
-def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: np.ndarray,
-                      b1: np.ndarray, S_list: list[np.ndarray], p_HP: np.ndarray,
-                      min_points: int = MIN_TURN_ANCHORS, iterations: int = 4, q1: np.ndarray | None = None,
+class TurnAnchors(NamedTuple):
+    """The static scene's anchors across a camera move, per anchor (K x 3 each): its unit bearing
+    before ``b0`` (in C0) and after ``b1`` (in C1), its point before ``q0`` (m, in C0) and after
+    ``q1`` (m, in C1; None: no depth after); NaN rows of ``q0``, ``q1``: no depth there.
+    ``perception.camera_motion.SceneTurn`` has these fields and serves as well."""
+
+    b0: np.ndarray
+    q0: np.ndarray
+    b1: np.ndarray
+    q1: np.ndarray | None = None
+
+
+def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, anchors: TurnAnchors, S_list: list[np.ndarray],
+                      p_HP: np.ndarray, min_points: int = MIN_TURN_ANCHORS, iterations: int = 4,
                       max_rotation_sd: float = MAX_TURN_ROTATION_SD):  # fmt: skip
     """The camera after a move (beyond the paper) from two things that the move left as they were:
     the static scene (its rotation) and the held tool (its position).
 
-    - The scene: per anchor its unit bearings ``b0`` (before, in C0) and ``b1`` (after, in C1) and
-      its point before ``q0`` (in C0, m; NaN rows: no depth, taken as far away); see
-      ``perception.camera_motion.SceneTurn``. A static point satisfies ``q0 - p_C0C1 ~ R_C0C1 b1``
+    - The scene: the ``anchors`` (``TurnAnchors``): per anchor its unit bearings ``b0`` (before, in
+      C0) and ``b1`` (after, in C1) and its point before ``q0`` (in C0, m; NaN rows: no depth, taken
+      as far away). A static point satisfies ``q0 - p_C0C1 ~ R_C0C1 b1``
       (directions), so given the camera's shift ``p_C0C1`` the turn is an orthogonal Procrustes
       problem on directions. Far anchors pin it to their pixel noise over the focal length, whatever
       the shift; the shift itself (the parallax) they hardly show.
@@ -339,13 +350,16 @@ def camera_after_turn(R_WC0: np.ndarray, p_WC0: np.ndarray, b0: np.ndarray, q0: 
     ``max_rotation_sd`` (``MAX_TURN_ROTATION_SD``).
 
     IdentificationError unless ``R_WC0`` is a finite 3 x 3 matrix, ``p_WC0`` a finite 3-vector,
-    ``b0`` and ``b1`` K x 3 arrays of finite non-zero bearings, ``q0`` (and ``q1`` unless None or
-    empty) a K x 3 array whose finite rows are non-zero, ``S_list`` a list of finite 16 x 16
-    statistics with as many finite ``p_HP`` points, ``min_points``, ``iterations`` integers >= 1 and
-    ``max_rotation_sd`` a number >= 0 (inf: no limit)."""
+    ``anchors`` has ``b0`` and ``b1``, K x 3 arrays of finite non-zero bearings, and ``q0`` (and
+    ``q1`` unless None or empty), K x 3 arrays whose finite rows are non-zero, ``S_list`` a list of
+    finite 16 x 16 statistics with as many finite ``p_HP`` points, ``min_points``, ``iterations``
+    integers >= 1 and ``max_rotation_sd`` a number >= 0 (inf: no limit)."""
     R_WC0, p_WC0 = real_array("R_WC0", R_WC0, MATRIX3), real_array("p_WC0", p_WC0, VECTOR3)
-    b0, b1 = _anchors("b0", b0, bearings=True), _anchors("b1", b1, bearings=True)
-    q0 = _anchors("q0", q0, bearings=False)
+    if not all(hasattr(anchors, name) for name in ("b0", "q0", "b1")):
+        raise IdentificationError(f"anchors must be a TurnAnchors (b0, q0, b1, q1), got {describe(anchors)}")
+    b0, b1 = _anchors("b0", anchors.b0, bearings=True), _anchors("b1", anchors.b1, bearings=True)
+    q0 = _anchors("q0", anchors.q0, bearings=False)
+    q1 = getattr(anchors, "q1", None)
     q1 = None if q1 is None else _anchors("q1", q1, bearings=False)
     if q1 is None or q1.size == 0:
         q1 = np.full_like(q0, np.nan)

@@ -20,6 +20,7 @@ from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.identification.eye_to_hand import pack_x
 from sustain_drake.identification.eye_to_hand_points import (
+    TurnAnchors,
     camera_after_turn,
     camera_given_points,
     spread_off_line,
@@ -34,8 +35,7 @@ def with_scene_turn(bank: CandidateBank, scene_turn) -> CandidateBank:
         # The turn of the move that cleared the model; the turned camera (at the old position) once,
         # to match new tracks to the known points on every frame until one leads.
         x0 = bank.moved_from_x
-        turned = camera_after_turn(x0[0:9].reshape(3, 3, order="F"), x0[9:12], scene_turn.b0, scene_turn.q0,
-                                   scene_turn.b1, [], [], q1=scene_turn.q1)
+        turned = camera_after_turn(x0[0:9].reshape(3, 3, order="F"), x0[9:12], scene_turn, [], [])
         bank = replace(bank, turn=scene_turn, turned_R_WC=None if turned is None else turned.R_WC,
                        turned_p_WC=turned.p_WC if turned is not None and turned.scene_shift else None)
     return bank
@@ -170,7 +170,7 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
             if distance[j] <= params.turn_radius and not np.any(others <= 2.0 * params.turn_radius):
                 pairs.append((c, known_p[j]))
     fit = _fit_dropping_misfits(pairs, lambda ps: camera_after_turn(
-        R_WC0, p_WC0, turn.b0, turn.q0, turn.b1, [S_of(c.statistic) for c, _ in ps],
+        R_WC0, p_WC0, TurnAnchors(turn.b0, turn.q0, turn.b1), [S_of(c.statistic) for c, _ in ps],
         np.array([p for _, p in ps])), params.observe_consistency**2 * bank.adopted_mse)  # fmt: skip
     if fit is None:
         return None
