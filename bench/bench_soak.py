@@ -14,7 +14,8 @@ and 0.2 deg, resident memory growth under 5 % from minute 5 to minute 30. Memory
 resident set (``/proc/self/statm``) every simulated minute; the logs the run keeps for its metrics
 go to disk every simulated minute (``experiments.log_spool``), and the samples they hold in memory
 at each reading are reported beside it. ``--out`` holds ``metrics.json``, ``log.npz``,
-``hand_eye_fig9.png``, ``memory.json`` and ``soak.md`` (the printed table).
+``hand_eye_fig9.png``, ``memory.json`` (with the commit the run ran at, which ``--results`` stamps
+on the page) and ``soak.md`` (the printed table).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from results_page import publish  # noqa: E402
 
 from sustain_drake.experiments.log_spool import log_sinks  # noqa: E402
 from sustain_drake.files import write_atomically  # noqa: E402
+from sustain_drake.provenance import source_commit  # noqa: E402
 from sustain_drake.station.scenario_files import load_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,7 +69,7 @@ class MemoryMonitor:
 
     def __init__(self, every: float, path: Path):
         self.every, self.next, self.samples, self.path = every, every, [], path
-        self.start = time.perf_counter()
+        self.start, self.commit = time.perf_counter(), source_commit()
 
     def __call__(self, t: float, simulator) -> None:
         if t + 1e-9 < self.next:
@@ -81,7 +83,7 @@ class MemoryMonitor:
               f"{s['logs_mb']:.1f} MB", flush=True)
 
     def write(self, wall: float | None = None) -> None:
-        data = {"every_s": self.every, "samples": self.samples,
+        data = {"commit": self.commit, "every_s": self.every, "samples": self.samples,
                 "wall_s": time.perf_counter() - self.start if wall is None else wall}
         write_atomically(self.path, json.dumps(data, indent=2) + "\n")
 
@@ -231,8 +233,9 @@ def main(argv=None) -> int:
     lines = report(args)
     write_atomically(args.out / "soak.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
-    if args.results:
-        publish("bench_soak", lines)
+    if args.results:  # stamped with the commit the run ran at (a report may come later)
+        memory = json.loads((args.out / "memory.json").read_text(encoding="utf-8"))
+        publish("bench_soak", lines, commit=memory.get("commit"))
     return 0
 
 

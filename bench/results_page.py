@@ -15,17 +15,18 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS_PAGE = ROOT / "docs" / "results.md"
 
 
-def publish(section: str, lines: list[str], page: Path = RESULTS_PAGE) -> None:
+def publish(section: str, lines: list[str], page: Path = RESULTS_PAGE, commit: str | None = None) -> None:
     """Replaces the block ``section`` of the results page (between ``<!-- BEGIN section -->`` and
     ``<!-- END section -->``) with ``lines``, the command that made them and the commit it ran on
-    (local changes to code say so). The page's prose around the block is kept."""
+    (``commit``, default this checkout's; local changes to code say so). The page's prose around
+    the block is kept."""
     text = page.read_text(encoding="utf-8")
     begin, end = f"<!-- BEGIN {section} -->", f"<!-- END {section} -->"
     if begin not in text or end not in text:
         raise SystemExit(f"{page}: no block {section} (add the markers {begin} ... {end})")
     command = " ".join(["python", *[shlex.quote(a) for a in [_relative(sys.argv[0]), *sys.argv[1:]]]])
-    block = [begin, "", f"Command: `{command}`; commit `{source_commit()}`, {time.strftime('%Y-%m-%d')}.", "",
-             *lines, "", end]
+    stamp = f"Command: `{command}`; commit `{commit or source_commit()}`, {time.strftime('%Y-%m-%d')}."
+    block = [begin, "", stamp, "", *lines, "", end]
     head, rest = text.split(begin, 1)
     write_atomically(page, head + "\n".join(block) + rest.split(end, 1)[1])
 

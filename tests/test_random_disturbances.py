@@ -16,6 +16,7 @@ import pytest
 from sustain_drake.experiments import hand_eye_metrics as m
 from sustain_drake.experiments.run import simulate_scenario
 from sustain_drake.experiments.targets import target_bound
+from sustain_drake.provenance import source_commit
 from sustain_drake.station import ScenarioError, load_scenario
 from sustain_drake.station.random_disturbances import (
     HEAD_MOVE,
@@ -164,7 +165,8 @@ def test_the_soak_builds_and_lists_its_drawn_disturbances(tmp_path):
     monitor = bench_soak.MemoryMonitor(0.1, tmp_path / "memory.json")
     simulate_scenario(s, tmp_path, duration=0.2, log_rate=10.0, replay=False, on_step=monitor)
     assert len(monitor.samples) == 2 and all(m["rss_mb"] > 0 and m["logs_mb"] > 0 for m in monitor.samples)
-    assert json.loads((tmp_path / "memory.json").read_text())["samples"] == monitor.samples
+    written = json.loads((tmp_path / "memory.json").read_text())
+    assert written["samples"] == monitor.samples and written["commit"] == source_commit()
     listed = json.loads((tmp_path / "metrics.json").read_text())["hand_eye"]["disturbances"]
     assert [(d["kind"], d["time_s"]) for d in listed] == [
         ("head_move" if isinstance(e, HeadMove) else "tool_slip", e.time) for e in timeline(s)]
