@@ -118,6 +118,7 @@ def bench_main(argv, doc: str, sweep: str, experiment: str | None, columns: list
     if len(table) < total:
         lines.append(f"- {len(table)} of the sweep's {total} cells have run (the rest: not yet)")
     print("\n".join(lines))
-    if args.results:
-        publish(block, lines)
+    if args.results:  # stamped with the commit(s) the cells ran at (a report may come later)
+        ran_at = sorted(set(table["commit"])) if "commit" in table and not table.empty else []
+        publish(block, lines, commit=", ".join(ran_at) or None)
     return 0
