@@ -376,6 +376,15 @@ def test_bad_call_raises_one_line_identification_error(name, args, expected):
     assert expected in message
 
 
+def test_a_name_with_line_breaks_still_gives_a_one_line_message():
+    """``check_rotations`` names the array with the caller's text; a line break in it (found by the
+    long fuzz) must not split the message."""
+    for name, value in (("\n", False), ("rotations\nof the hand", np.full((2, 3, 3), np.nan)), ("", None)):
+        with pytest.raises(IdentificationError) as e:
+            batch.check_rotations(name, value)
+        assert str(e.value).strip() and "\n" not in str(e.value)
+
+
 def test_a_refused_sample_leaves_the_state_unchanged():
     ident = _filled_eye()
     state = ident.state

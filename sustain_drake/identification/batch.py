@@ -65,6 +65,7 @@ def check_rotations(name: str, R: np.ndarray) -> None:
     (each entry of ``R^T R - I``), or if ``R`` is not a finite (n, 3, 3) array."""
     if type(name) is not str:
         raise IdentificationError(f"name must be a string, got {type(name).__name__}")
+    name = " ".join(name.split()) or "R"  # the caller's text: its message stays one line
     R = real_array(name, R, (None, 3, 3))
     err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2))
     det = np.linalg.det(R)
