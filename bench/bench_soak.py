@@ -235,7 +235,7 @@ def main(argv=None) -> int:
     print("\n".join(lines))
     if args.results:  # stamped with the commit the run ran at (a report may come later)
         memory = json.loads((args.out / "memory.json").read_text(encoding="utf-8"))
-        publish("bench_soak", lines, commit=memory.get("commit"))
+        publish("bench_soak", lines, commit=memory.get("commit", "not recorded in memory.json"))
     return 0
 
 

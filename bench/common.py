@@ -112,13 +112,13 @@ def bench_main(argv, doc: str, sweep: str, experiment: str | None, columns: list
         lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
         lines += [row_text(row) for _, row in table.iterrows()]
     lines += (target_lines(table, experiment) if experiment else []) + extra(table)
-    if "commit" in table and not table.empty:
-        lines.append("- cells run at commit(s): " + ", ".join(f"`{c}`" for c in sorted(set(table["commit"]))))
+    ran_at = sorted(set(table["commit"])) if "commit" in table and not table.empty else []
+    if ran_at:
+        lines.append("- cells run at commit(s): " + ", ".join(f"`{c}`" for c in ran_at))
     total = len(select_cells(load_sweep(args.sweep), args.cells, args.duration).cells)
     if len(table) < total:
         lines.append(f"- {len(table)} of the sweep's {total} cells have run (the rest: not yet)")
     print("\n".join(lines))
     if args.results:  # stamped with the commit(s) the cells ran at (a report may come later)
-        ran_at = sorted(set(table["commit"])) if "commit" in table and not table.empty else []
         publish(block, lines, commit=", ".join(ran_at) or None)
     return 0

@@ -217,7 +217,7 @@ class CameraAfterTurn(NamedTuple):
     rms_angle: float
     num_anchors: int
     scene_shift: bool
-    rotation_sd: float = 0.0
+    rotation_sd: float
 
 
 # count: the fewest anchors a turn is fitted to. Two bearings fix a rotation; the misfit test (three
