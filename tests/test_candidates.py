@@ -84,6 +84,20 @@ def test_hand_point_leads_another_link_never_converges():
     assert [a.feature_id for a in bank.adoptions] == [9]
 
 
+def test_a_leader_waits_while_its_cameras_95_percent_region_exceeds_the_accuracy_asked_for():
+    """``camera_accuracy``: the converged point leads only when its camera's 95 % region lies within
+    the accuracy asked for; a stricter accuracy than its views give holds it back, asking for motion."""
+    def frames(k, X, rng):
+        return None if k >= 300 else ([9], [seen(X, P_TOOL, rng)], [True], [True])
+
+    bank, _ = run(frames, params=replace(PARAMS, camera_accuracy=0.05, camera_rotation_accuracy=0.05))
+    assert [a.feature_id for a in bank.adoptions] == [9]
+    estimate = bank.find(9).solution.estimate
+    sd = candidates.fitting.joint_camera_sd([bank.find(9).statistic], estimate, PARAMS)
+    bank, _ = run(frames, params=replace(PARAMS, camera_accuracy=0.5 * candidates.fitting.REGION_95 * sd[0]))
+    assert bank.leader < 0 and not bank.adoptions and bank.more_motion and bank.held_back == 9
+
+
 def test_other_link_alone_is_never_adopted_and_is_rejected_in_time():
     params = CandidateParams(max_unconverged_time=5.0, confirm_with_witness=False)
 

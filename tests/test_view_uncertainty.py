@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import numpy as np
 from eye_to_hand_data import make_points, make_truth
 
 from sustain_drake.identification import EyeToHandIdentifier
 from sustain_drake.identification import eye_to_hand_points as points
 from sustain_drake.identification.candidates import CandidateParams
-from sustain_drake.identification.candidates.fitting import S_of, joint_camera_sd
+from sustain_drake.identification.candidates.fitting import REGION_95, S_of, joint_camera_sd, within_accuracy
 from sustain_drake.identification.eye_to_hand import EyeToHandEstimate, pack_x
 
 P_HP = np.array([[0.05, 0.02, 0.12], [-0.08, 0.04, 0.10], [0.0, -0.09, 0.15]])  # m, in the hand
@@ -44,3 +47,31 @@ def test_the_camera_sd_falls_as_one_over_the_root_of_the_samples_and_covers_the_
 def test_no_sd_without_an_estimate():
     _, states, _ = statistics_and_fit(50, seed=1)
     assert joint_camera_sd(states, None, PARAMS) is None
+
+
+def test_a_camera_is_within_the_accuracy_asked_for_only_when_its_95_percent_region_is():
+    truth, states, estimate = statistics_and_fit(100, seed=3)
+    sd_position, sd_rotation = joint_camera_sd(states, estimate, PARAMS)
+    radius, angle = REGION_95 * sd_position, REGION_95 * sd_rotation
+
+    def within(position, rotation):
+        return within_accuracy(states, estimate, replace(PARAMS, camera_accuracy=position,
+                                                         camera_rotation_accuracy=rotation))
+
+    assert within(1.01 * radius, 1.01 * angle)
+    assert not within(0.99 * radius, 1.01 * angle) and not within(1.01 * radius, 0.99 * angle)
+    assert within(math.inf, math.inf)  # off: no fit needed
+    assert not within_accuracy(states, None, replace(PARAMS, camera_accuracy=1.0))
+
+
+def test_the_95_percent_region_holds_the_camera_in_about_95_percent_of_runs():
+    """``REGION_95`` times the joint fit's RMS sd: the camera lies inside in 52-60 of 60 runs of three
+    points with 1 mm of noise (54 here; 92.5 % over 200 such runs: the isotropic radius covers an
+    elongated region slightly less than 95 %). A radius of one sd holds 40 of them."""
+    inside = 0
+    for seed in range(60):
+        truth, states, estimate = statistics_and_fit(120, seed=100 + seed)
+        sd_position, _ = joint_camera_sd(states, estimate, PARAMS)
+        error = float(np.linalg.norm(estimate.p_WC - truth.X_WC[:3, 3]))
+        inside += error <= REGION_95 * sd_position
+    assert 52 <= inside <= 60

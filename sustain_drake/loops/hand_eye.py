@@ -151,6 +151,8 @@ def hand_eye_parts(config: HandEyeConfig) -> HandEyeParts:
         keep_tool_points=True, turn_admit_known=True,
         # after a slip with the scene still, only p_HP is new (3 unknowns): 1.7 s at 30 Hz
         keep_camera_min_samples=50,
+        # the camera's 95 % region within the hand-eye targets (2 mm, 0.2 deg) before adoption
+        camera_accuracy=0.002, camera_rotation_accuracy=math.radians(0.2),
     )  # fmt: skip
     # cornerSubPix with a 9 x 9 window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it),
     # centrally symmetric points first, then (max_view_shift_sigmas) points fixed on their face, the

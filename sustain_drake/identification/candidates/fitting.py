@@ -6,6 +6,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+from scipy.stats import chi2
 
 from sustain_drake.identification.candidates.bank import Candidate
 from sustain_drake.identification.candidates.params import CandidateParams
@@ -243,3 +244,21 @@ def joint_camera_sd(statistics: list, estimate: EyeToHandEstimate | None, params
         return None
     d = np.diagonal(covariance)
     return math.sqrt(float(d[3:6].sum())), math.sqrt(float(d[0:3].sum()))
+
+
+# ratio: the radius holding 95 % of a 3-D normal error to its RMS (``sqrt(trace)``), for an
+# isotropic one: ``sqrt(chi2_3(0.95) / 3)`` = 1.614
+REGION_95 = math.sqrt(float(chi2.ppf(0.95, 3)) / 3.0)
+
+
+def within_accuracy(statistics: list, estimate: EyeToHandEstimate | None, params: CandidateParams) -> bool:
+    """``camera_accuracy``, ``camera_rotation_accuracy``: whether the 95 % region of the camera fitted
+    to ``statistics`` (``joint_camera_sd`` times ``REGION_95``) lies within both. True when both are
+    off (inf); False without an estimate or when the fit is undetermined. The joint fit's sd
+    measures the views themselves: a camera from a few points seen from too few sides, or with
+    too few samples, waits (docs/hand_eye_record.md, "The joint fit's own uncertainty")."""
+    if math.isinf(params.camera_accuracy) and math.isinf(params.camera_rotation_accuracy):
+        return True
+    sd = joint_camera_sd(statistics, estimate, params)
+    return (sd is not None and REGION_95 * sd[0] <= params.camera_accuracy
+            and REGION_95 * sd[1] <= params.camera_rotation_accuracy)

@@ -3,7 +3,8 @@ error if several converge on the same frame) is the leader until the next reset;
 (Gauss-Newton) and it is what a ``CoordinationStateMachine`` adopts. Beyond the paper: a second point
 must confirm its camera (``confirm_with_witness``), the camera may be refined jointly with every point
 it explains (``joint``, ``refine_interval``), and a leader whose views do not pin the camera's rotation
-waits for more motion (``min_rotation_lever``, ``min_adopt_rotation_spread``). With no leader, the
+(``min_rotation_lever``, ``min_adopt_rotation_spread``) or whose camera's 95 % region exceeds the
+accuracy asked for (``camera_accuracy``) waits for more motion. With no leader, the
 recoveries after a slip and after a camera move may choose one."""
 
 from dataclasses import replace
@@ -17,6 +18,7 @@ from sustain_drake.identification.candidates.fitting import (
     mean_squared_error_of,
     rotation_spread,
     smallest_rotation_lever,
+    within_accuracy,
 )
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.observation import consistent
@@ -95,8 +97,11 @@ def _adopt(best: Candidate, params: CandidateParams, seen: SeenFrame, pool: Pool
     spread = rotation_spread(best.statistic)
     held_back = (lever < params.min_rotation_lever
                  or spread < params.min_adopt_rotation_spread) and not unseen
-    if held_back:
-        return pool, True
+    # camera_accuracy: the camera's own 95 % region must lie within the accuracy asked for. A
+    # point no longer seen gives no more views: it is not adopted, and no longer held.
+    wide = not within_accuracy(statistics, best.solution.estimate, params)
+    if held_back or wide:
+        return pool, not unseen
     kept = [best if c.feature_id == best.feature_id else c for c in pool.kept]
     leader = best.feature_id
     adoptions = pool.adoptions + (Adoption(float(seen.time), leader, best.statistic.copy(),

@@ -109,6 +109,11 @@ class CandidateParams:
     # count: samples of a candidate after which more motion is asked for until the first
     # identification: the rotation is pinned only as the hand moves; 0: off
     motion_min_samples: int = 0
+    # m and rad: the accuracy the robot needs of the camera; a leader is adopted only when its
+    # camera's 95 % region (the joint fit's own covariance, ``fitting.camera_region_95``) lies
+    # within both, else it waits for views (a count of samples does not know the views); inf: off
+    camera_accuracy: float = math.inf
+    camera_rotation_accuracy: float = math.inf
 
     def __post_init__(self):
         counts = (self.observe_min_samples, self.keep_camera_min_samples, self.primary_failures,
@@ -138,3 +143,6 @@ class CandidateParams:
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a positive number, got {value}")
+        for name in ("camera_accuracy", "camera_rotation_accuracy"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive (inf: off), got {getattr(self, name)}")
