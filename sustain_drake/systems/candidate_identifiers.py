@@ -160,7 +160,8 @@ class CandidateIdentifiers(LeafSystem):
     ``more_motion`` (1): 1 while no candidate leads and either, before the first identification, a
     candidate has ``params.motion_min_samples`` samples, or (from a frame where a candidate
     converged and was confirmed but its points' views did not pin the camera's rotation,
-    ``params.min_rotation_lever`` or ``params.min_adopt_rotation_spread``) until a leader is
+    ``params.min_rotation_lever`` or ``params.min_adopt_rotation_spread``, or its camera's 95 %
+    region exceeded ``params.camera_accuracy`` or ``camera_rotation_accuracy``) until a leader is
     chosen, a reset, or no converged candidate is left; else 0: the hand should move more (connect
     an ``IdentifyingMotion``'s ``more_motion``).
 
