@@ -6,6 +6,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from eye_to_hand_data import make_points, make_truth
 
 from sustain_drake.identification import EyeToHandIdentifier
@@ -62,6 +63,9 @@ def test_a_camera_is_within_the_accuracy_asked_for_only_when_its_95_percent_regi
     assert not within(0.99 * radius, 1.01 * angle) and not within(1.01 * radius, 0.99 * angle)
     assert within(math.inf, math.inf)  # off: no fit needed
     assert not within_accuracy(states, None, replace(PARAMS, camera_accuracy=1.0))
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(ValueError, match="camera_accuracy must be positive"):
+            CandidateParams(camera_accuracy=bad)
 
 
 def test_the_95_percent_region_holds_the_camera_in_about_95_percent_of_runs():

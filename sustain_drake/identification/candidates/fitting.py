@@ -246,8 +246,8 @@ def joint_camera_sd(statistics: list, estimate: EyeToHandEstimate | None, params
     return math.sqrt(float(d[3:6].sum())), math.sqrt(float(d[0:3].sum()))
 
 
-# ratio: the radius holding 95 % of a 3-D normal error to its RMS (``sqrt(trace)``), for an
-# isotropic one: ``sqrt(chi2_3(0.95) / 3)`` = 1.614
+# ratio of the radius that holds 95 % of an isotropic 3-D normal error to the error's RMS
+# (``sqrt(trace)`` of its covariance): ``sqrt(chi2_3(0.95) / 3)`` = 1.614
 REGION_95 = math.sqrt(float(chi2.ppf(0.95, 3)) / 3.0)
 
 

@@ -110,7 +110,7 @@ class CandidateParams:
     # identification: the rotation is pinned only as the hand moves; 0: off
     motion_min_samples: int = 0
     # m and rad: the accuracy the robot needs of the camera; a leader is adopted only when its
-    # camera's 95 % region (the joint fit's own covariance, ``fitting.camera_region_95``) lies
+    # camera's 95 % region (the joint fit's own covariance, ``fitting.within_accuracy``) lies
     # within both, else it waits for views (a count of samples does not know the views); inf: off
     camera_accuracy: float = math.inf
     camera_rotation_accuracy: float = math.inf
