@@ -97,9 +97,10 @@ def _adopt(best: Candidate, params: CandidateParams, seen: SeenFrame, pool: Pool
     spread = rotation_spread(best.statistic)
     held_back = (lever < params.min_rotation_lever
                  or spread < params.min_adopt_rotation_spread) and not unseen
-    # camera_accuracy: the camera's own 95 % region must lie within the accuracy asked for. A
-    # point no longer seen gives no more views: it is not adopted, and no longer held.
-    wide = not within_accuracy(statistics, best.solution.estimate, params)
+    # camera_accuracy: the camera's own 95 % region must lie within the accuracy asked for (not
+    # computed for a leader already held back). A point no longer seen gives no more views: it is
+    # not adopted, and no longer held.
+    wide = not held_back and not within_accuracy(statistics, best.solution.estimate, params)
     if held_back or wide:
         return pool, not unseen
     kept = [best if c.feature_id == best.feature_id else c for c in pool.kept]
