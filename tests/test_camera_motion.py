@@ -11,11 +11,12 @@ from pydrake.systems.sensors import CameraInfo
 
 from sustain_drake.perception import camera_motion
 from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState
-from sustain_drake.perception.optical_flow import TrackedFeatures
+from sustain_drake.perception.optical_flow import PinholeIntrinsics, TrackedFeatures
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.motion_coincidence_detector import FeatureBodyFlags
 
 SIZE = (320, 240)
+INTRINSICS = PinholeIntrinsics(SIZE[0], SIZE[1], 580.0, 580.0, SIZE[0] / 2 - 0.5, SIZE[1] / 2 - 0.5)
 FPS = 30.0
 PARAMS = CameraMotionParams()
 
@@ -65,7 +66,8 @@ def run(scene, frames, motions_of_k, arm_moving_of_k=lambda k: False, state=None
     outputs = []
     for k in range(start, start + frames):
         ids, p, flow, robot = scene.frame(motions_of_k(k))
-        state = camera_motion.step(state, k / FPS, ids, p, flow, robot, arm_moving_of_k(k), params, SIZE)
+        frame = TrackedFeatures(ids=ids, p_px=p, flow_px=flow, time=k / FPS)
+        state = camera_motion.step(state, frame, robot, arm_moving_of_k(k), params, SIZE)
         outputs.append(state.output())
     return state, np.array(outputs)
 
@@ -173,18 +175,20 @@ def test_a_resting_arm_is_static_scene_and_a_small_move_is_not_a_camera_move():
 def test_bad_input_and_parameters():
     with pytest.raises(ValueError, match="camera motion parameters"):
         CameraMotionParams(move_px=0.1, still_px=0.5)
+    def frame(n, flows=None, time=0.0, **points):
+        return TrackedFeatures(ids=np.arange(n), p_px=np.zeros((n, 2)), flow_px=np.zeros((flows or n, 2)),
+                               time=time, **points)  # fmt: skip
+
     with pytest.raises(ValueError, match="one per feature"):
-        camera_motion.step(CameraMotionState(), 0.0, np.arange(3), np.zeros((3, 2)), np.zeros((2, 2)),
-                           np.zeros(3, bool), False, PARAMS, SIZE)  # fmt: skip
+        camera_motion.step(CameraMotionState(), frame(3, flows=2, time=0.1), np.zeros(3, bool), False, PARAMS,
+                           SIZE)  # fmt: skip
     with pytest.raises(ValueError, match="2 points, 3 valid flags"):
-        camera_motion.step(CameraMotionState(), 0.0, np.arange(3), np.zeros((3, 2)), np.zeros((3, 2)),
-                           np.zeros(3, bool), False, PARAMS, SIZE, np.zeros((2, 3)),
-                           np.ones(3, bool))  # fmt: skip
+        points = frame(3, time=0.1, p_CP=np.zeros((2, 3)), valid=np.ones(3, bool))
+        camera_motion.step(CameraMotionState(), points, np.zeros(3, bool), False, PARAMS, SIZE, INTRINSICS)
     # A frame not newer than the last is skipped.
-    state = camera_motion.step(CameraMotionState(), 1.0, np.arange(3), np.zeros((3, 2)), np.zeros((3, 2)),
-                               np.zeros(3, bool), False, PARAMS, SIZE)  # fmt: skip
-    assert camera_motion.step(state, 1.0, np.arange(2), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(2, bool),
-                              False, PARAMS, SIZE) is state  # fmt: skip
+    state = camera_motion.step(CameraMotionState(), frame(3, time=1.0), np.zeros(3, bool), False, PARAMS,
+                               SIZE)  # fmt: skip
+    assert camera_motion.step(state, frame(2, time=1.0), np.zeros(2, bool), False, PARAMS, SIZE) is state
 
 
 class ScriptedFeatures(LeafSystem):

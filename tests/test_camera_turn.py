@@ -19,7 +19,7 @@ from sustain_drake.identification.eye_to_hand_points import TurnAnchors, camera_
 from sustain_drake.identification.rotation import nearest_rotation
 from sustain_drake.perception import camera_motion
 from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState, SceneTurn
-from sustain_drake.perception.optical_flow import PinholeIntrinsics
+from sustain_drake.perception.optical_flow import PinholeIntrinsics, TrackedFeatures
 
 SIZE = (640, 480)
 INTRINSICS = PinholeIntrinsics(640, 480, 580.0, 580.0, 319.5, 239.5)
@@ -75,9 +75,10 @@ def run_detector(frames, path, p_W, intrinsics=INTRINSICS, seed=1, appear=None):
         flow[appear == k] = 0.0  # seeded in this frame
         previous = px
         on = appear <= k
-        state = camera_motion.step(state, k * DT, np.flatnonzero(on), px[on], flow[on],
-                                   np.zeros(on.sum(), bool), np.zeros(1, bool), PARAMS, SIZE, p_CP[on],
-                                   valid[on], intrinsics)  # fmt: skip
+        frame = TrackedFeatures(ids=np.flatnonzero(on), p_px=px[on], flow_px=flow[on], p_CP=p_CP[on],
+                                valid=valid[on], time=k * DT)
+        state = camera_motion.step(state, frame, np.zeros(on.sum(), bool), np.zeros(1, bool), PARAMS, SIZE,
+                                   intrinsics)  # fmt: skip
     return state
 
 

@@ -90,7 +90,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from sustain_drake.perception.optical_flow import PinholeIntrinsics, pinhole_points
+from sustain_drake.perception.optical_flow import PinholeIntrinsics, TrackedFeatures, pinhole_points
 
 # The view of the still scene is a running mean over at most this many frames (1 s at 30 Hz): a
 # slow drift of the camera below ``still_px`` does not smear it.
@@ -339,27 +339,29 @@ def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionPa
     return FrameMotion(True, moving, M, n, fraction, moved)
 
 
-def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarray, flow_px: np.ndarray,
-         robot: np.ndarray, joints_moving: np.ndarray, params: CameraMotionParams,
-         image_size: tuple[int, int], p_CP: np.ndarray | None = None, valid: np.ndarray | None = None,
+def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray, joints_moving: np.ndarray,
+         params: CameraMotionParams, image_size: tuple[int, int],
          intrinsics: PinholeIntrinsics | None = None) -> CameraMotionState:  # fmt: skip
-    """One frame of tracked features at ``time`` (``ids``, ``p_px``, ``flow_px``, and for the turn
-    ``p_CP`` and ``valid``, as in ``optical_flow.TrackedFeatures``; ``robot``: per feature, a body
-    feature or in a body cell; ``joints_moving``: per actuator, it moves now). ``image_size`` is
+    """One frame of tracked ``features`` (``optical_flow.TrackedFeatures``: its ``time``, ``ids``,
+    ``p_px``, ``flow_px``, and for the turn ``p_CP`` and ``valid``); ``robot``: per feature, a body
+    feature or in a body cell; ``joints_moving``: per actuator, it moves now. ``image_size`` is
     (width, height). With ``intrinsics`` (and ``params.turn_frames`` > 0) the views of the still
     scene and the turn of each move are kept too (module docstring). Returns the new state
     (``state`` itself for a frame not newer than the last one)."""
+    time = features.time
     if not time > state.last_time:
         return state
-    ids = np.asarray(ids, np.int64).ravel()
-    p_px = np.asarray(p_px, float).reshape(-1, 2)
-    flow_px = np.asarray(flow_px, float).reshape(-1, 2)
+    ids = np.asarray(features.ids, np.int64).ravel()
+    p_px = np.asarray(features.p_px, float).reshape(-1, 2)
+    flow_px = np.asarray(features.flow_px, float).reshape(-1, 2)
     robot = np.asarray(robot, bool).ravel()
     if not (p_px.shape[0] == flow_px.shape[0] == robot.shape[0] == ids.shape[0]):
         raise ValueError(f"camera motion: {ids.shape[0]} ids, {p_px.shape[0]} pixels, "
                          f"{flow_px.shape[0]} flows, {robot.shape[0]} robot flags: one per feature expected")
-    if p_CP is not None and valid is not None:
-        p_CP, valid = np.asarray(p_CP, float).reshape(-1, 3), np.asarray(valid, bool).ravel()
+    p_CP = valid = None
+    if intrinsics is not None:  # the turn needs the features' 3-D points
+        p_CP = np.asarray(features.p_CP, float).reshape(-1, 3)
+        valid = np.asarray(features.valid, bool).ravel()
         if not (p_CP.shape[0] == valid.shape[0] == ids.shape[0]):
             raise ValueError(f"camera motion: {ids.shape[0]} ids, {p_CP.shape[0]} points, {valid.shape[0]} "
                              "valid flags: one per feature expected")
@@ -430,7 +432,7 @@ def step(state: CameraMotionState, time: float, ids: np.ndarray, p_px: np.ndarra
         rest = state.rest + 1
         new = replace(new, rest=rest, moving=rest < params.rest_frames)
     if (intrinsics is not None and params.turn_frames > 0 and not new.moving and frame.judged
-            and frame.displacement_px <= params.view_still_px and p_CP is not None and valid is not None):
+            and frame.displacement_px <= params.view_still_px):
         # After a move, the anchors of the view before that are still tracked count at once: a
         # turn's perspective takes the image's edges off the similarity fit, so many anchors
         # restart their still time during it (the turn's fit leaves out those that did move).

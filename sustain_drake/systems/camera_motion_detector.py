@@ -130,8 +130,7 @@ class CameraMotionDetector(LeafSystem):
             f = self._features.Eval(context)
             robot = self._robot(context, f)
             new = replace(new, motion=camera_motion.step(
-                old.motion, f.time, f.ids, f.p_px, f.flow_px, robot, joints_moving, self._params, self._size,
-                f.p_CP, f.valid, self._intrinsics))
+                old.motion, f, robot, joints_moving, self._params, self._size, self._intrinsics))
         state.get_mutable_abstract_state(self._state).set_value(new)
 
     def _calc_flags(self, context, output) -> None:

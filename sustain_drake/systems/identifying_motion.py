@@ -41,7 +41,12 @@ class IdentifyingMotion(LeafSystem):
     within that reach (max-norm) of the posture the arm had when it was set (the anchor: there the
     points were seen; a walk from posture to posture drifts until their faces turn away), the
     farthest from the current one of ``num_draws``, and come after one ``interval`` near a posture,
-    not ``max_hold``: the far postures end the tracks of the points that want more motion.
+    not ``max_hold``: the far postures end the tracks of the points that want more motion. Then
+    the detector's confirming trials and these postures take turns: a pending detector request that
+    has not had the arm since the last posture within reach goes first and keeps it for
+    ``max_hold`` (a return, a rest and a move again), and the next posture within reach waits for
+    that. The witnesses a point needs before it is adopted are body features only those trials
+    find; asked every second, the postures within reach would hold every trial back.
 
     .. pydrake_system::
 
