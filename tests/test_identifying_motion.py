@@ -92,16 +92,16 @@ def test_a_far_posture_before_any_convergence_when_the_identifiers_ask_for_more_
 
 
 def test_with_a_reach_the_identifiers_ask_is_met_at_once_within_reach():
-    """``more_motion_reach``: while the identifiers ask for more motion and the detector asks
-    nothing, a posture within the reach (max-norm) of the arm's posture when they first asked (the
-    anchor, where their points were seen: no walk away from it), after one interval near a posture
-    (not ``max_hold``); the far postures of the whole ranges otherwise."""
+    """``more_motion_reach``: while the identifiers ask for more motion, a posture within the reach
+    (max-norm) of the arm's posture when they first asked (the anchor, where their points were seen:
+    no walk away from it), after one interval near a posture (not ``max_hold``); the far postures
+    of the whole ranges otherwise."""
     postures = []
     new, own, forwarded = _chatty_detector(observed_before=0.0, more_motion=1.0, reach=0.3,
-                                           postures=postures, detector_from=np.inf)
+                                           postures=postures)
     # One interval near a posture (the arm's start) is enough: the first at 1.1 s, and five in
     # 10 s, where without the reach two came (4.3 and 9.7 s, above).
-    assert forwarded == [] and own[0] == pytest.approx(1.1, abs=0.15) and len(own) >= 4
+    assert own[0] == pytest.approx(1.1, abs=0.15) and len(own) >= 4
     lower, upper = np.array(RANGES).T  # the arm starts at 0, outside the ranges: from the nearest in them
     anchor = np.clip(postures[0][0], lower, upper)
     from_anchor = [np.max(np.abs(requested - anchor)) for _, requested in postures]
@@ -115,45 +115,29 @@ def test_with_a_reach_the_identifiers_ask_is_met_at_once_within_reach():
         IdentifyingMotion(RANGES, interval=1.0, more_motion_reach=0.0)
 
 
-def test_with_a_reach_the_detectors_trials_and_the_postures_within_reach_take_turns():
-    """The detector asking every 0.5 s while the identifiers ask with a reach: its pending request
-    goes first and has the arm for ``max_hold`` (3 s: a return, a rest and a move again, the
-    confirming trial that finds the body features a point's witnesses come from); then a posture
-    within reach, and the detector's requests wait until the arm is there (1 s), then have it again.
-    Before, the postures within reach came every second and the detector's trials never had the arm."""
-    new, own, forwarded = _chatty_detector(observed_before=0.0, more_motion=1.0, reach=0.3)
-    assert forwarded[0] == pytest.approx(0.6, abs=0.15)  # the first change of the detector's id
-    assert own == pytest.approx([3.0, 7.1], abs=0.15)
-    assert all(not (o <= f < o + 1.0) for o in own for f in forwarded)  # the arm on its way
-    turns = [[f for f in forwarded if start <= f < start + 3.0] for start in (0.1, 4.1)]
-    assert [len(turn) for turn in turns] == [5, 6]  # every request of the turn forwarded
-
-
 def test_the_anchor_is_set_anew_each_time_the_identifiers_ask_again():
-    """An ask that ends (3 s; the detector's requests, from then on, take the arm to its posture Q)
-    and comes back (6 s, after the detector's 3 s turn): the postures asked for after it are within
-    the reach of where the arm is then (Q), not of the first anchor (the arm's start, 0.4-0.5 rad
-    from Q on three joints)."""
+    """An ask that ends (3 s: the detector's requests take the arm to its posture Q) and comes back
+    (6 s): the postures asked for after it are within the reach of where the arm is then (Q), not of
+    the first anchor (the arm's start, 0.4-0.5 rad from Q on three joints)."""
     postures = []
     _chatty_detector(observed_before=0.0, more_motion=lambda t: float(not 3.0 <= t < 6.0), reach=0.1,
-                     postures=postures, detector_from=3.0)
+                     postures=postures)
     lower, upper = np.array(RANGES).T
     first_anchor = np.clip(postures[0][0], lower, upper)
     before = [requested for q, requested in postures if np.max(np.abs(q - Q)) > 0.2]
     again = [(q, requested) for q, requested in postures if np.max(np.abs(q - Q)) <= 0.2]
-    assert len(before) >= 1 and len(again) >= 1
+    assert len(before) >= 1 and len(again) >= 3
     assert max(np.max(np.abs(r - first_anchor)) for r in before) <= 0.1 + 1e-9
     assert max(np.max(np.abs(r - Q)) for _, r in again) <= 0.1 + 1e-9  # the new anchor: Q
     assert min(np.max(np.abs(r - first_anchor)) for _, r in again) > 0.3
 
 
-def _chatty_detector(observed_before, more_motion=None, reach=None, postures=None, detector_from=0.0):
+def _chatty_detector(observed_before, more_motion=None, reach=None, postures=None):
     """The requests made over 10 s (time, joint), the own ones' and the detector's times; with a
-    list ``postures``, each own request's ``(arm's posture, requested posture)`` is appended. The
-    detector asks from ``detector_from`` s on."""
+    list ``postures``, each own request's ``(arm's posture, requested posture)`` is appended."""
     builder = DiagramBuilder()
     scripted = builder.AddSystem(Scripted(t_observe=np.inf, t_request=np.inf, observe=(0.1, observed_before)))
-    detector = builder.AddSystem(Chatty(detector_from))
+    detector = builder.AddSystem(Chatty())
     motion = builder.AddSystem(IdentifyingMotion(RANGES, interval=1.0, seed=3, period=0.1,
                                                  more_motion_reach=reach))
     posture = builder.AddSystem(MatrixGain(np.hstack([np.zeros((5, 2)), np.eye(5)])))  # q of the request
@@ -171,7 +155,7 @@ def _chatty_detector(observed_before, more_motion=None, reach=None, postures=Non
     for t in np.arange(0.1, 10.0 + 1e-9, 0.1):
         simulator.AdvanceTo(t)
         out = motion.GetOutputPort("confirm").Eval(motion.GetMyContextFromRoot(simulator.get_context()))
-        if postures is not None and out[0] > 0 and out[1] == -1.0 and (not joints or out[0] != joints[-1][1]):
+        if postures is not None and out[1] == -1.0 and (not joints or out[0] != joints[-1][1]):
             q = arm.get_output_port().Eval(arm.GetMyContextFromRoot(simulator.get_context()))
             postures.append((np.array(q), np.array(out[2:])))
         joints.append((round(t, 1), out[0], out[1]))
@@ -180,18 +164,12 @@ def _chatty_detector(observed_before, more_motion=None, reach=None, postures=Non
 
 
 class Chatty(LeafSystem):
-    """A detector with a new confirming request (joint 2) every 0.5 s from ``start`` s on (id 0,
-    none, before)."""
+    """A detector with a new confirming request (joint 2) every 0.5 s."""
 
-    def __init__(self, start=0.0):
+    def __init__(self):
         super().__init__()
         self.DeclareVectorOutputPort("confirm", 7, lambda c, o: o.SetFromVector(
-            [_request_id(c.get_time(), start), 2.0, *Q]))  # fmt: skip
-
-
-def _request_id(t, start):
-    """Chatty's request id at ``t``: a new one every 0.5 s from ``start`` on, 0 before."""
-    return 1.0 + np.floor((t - start) / 0.5) if t >= start else 0.0
+            [1.0 + np.floor(c.get_time() / 0.5), 2.0, *Q]))  # fmt: skip
 
 
 class Asking(LeafSystem):

@@ -11,10 +11,9 @@ from sustain_drake.identification import coordination
 # State vector: [output id, last detector id seen, time of the last request (own or detector's),
 # own requests so far, since when the arm stays near one posture, time of the last request made
 # over the detector's, 1 once the state machine has observed, 1 while the postures within reach are
-# drawn about the anchor, when the detector's turn began], that posture (n), the anchor (n), then
-# the output request [joint, q_1..q_n].
-_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED, _HAS_OBSERVED, _ANCHORED, _TURN = range(9)
-_POSTURE = 9
+# drawn about the anchor], that posture (n), the anchor (n), then the output request [joint, q_1..q_n].
+_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED, _HAS_OBSERVED, _ANCHORED = range(8)
+_POSTURE = 8
 _REACHED = 0.05  # rad (max-norm): the arm is at a requested posture
 _NEAR = 0.2  # rad (max-norm): the arm stays near one posture (the confirming trials' reach)
 
@@ -41,12 +40,7 @@ class IdentifyingMotion(LeafSystem):
     within that reach (max-norm) of the posture the arm had when it was set (the anchor: there the
     points were seen; a walk from posture to posture drifts until their faces turn away), the
     farthest from the current one of ``num_draws``, and come after one ``interval`` near a posture,
-    not ``max_hold``: the far postures end the tracks of the points that want more motion. Then
-    the detector's confirming trials and these postures take turns: a pending detector request that
-    has not had the arm since the last posture within reach goes first and keeps it for
-    ``max_hold`` (a return, a rest and a move again), and the next posture within reach waits for
-    that. The witnesses a point needs before it is adopted are body features only those trials
-    find; asked every second, the postures within reach would hold every trial back.
+    not ``max_hold``: the far postures end the tracks of the points that want more motion.
 
     .. pydrake_system::
 
@@ -95,7 +89,7 @@ class IdentifyingMotion(LeafSystem):
         self._request = self._anchor + n  # where the output request starts in the state
         initial = np.zeros(self._request + 1 + n)
         initial[self._request] = -1.0  # the output request's joint: -1, a usual move
-        initial[_LAST_FORCED] = initial[_TURN] = -np.inf
+        initial[_LAST_FORCED] = -np.inf
         initial[_POSTURE:self._anchor] = np.inf  # no posture yet: the first sets it
         self._state = self.DeclareDiscreteState(initial)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
@@ -129,28 +123,18 @@ class IdentifyingMotion(LeafSystem):
             # (an arm just outside its ranges still gets a box in them)
             x[self._anchor:self._request], x[_ANCHORED] = np.clip(q, *self._ranges.T), 1.0
         hold = self._interval if gentle else self._max_hold
-        # With a reach, the detector's confirming trials and the postures within reach take turns: a
-        # pending request that has not had the arm since the last posture within reach goes first
-        # and keeps it for max_hold (a return, a rest and a move again). The witnesses a point needs
-        # are body features that only those trials find.
-        pending = request[0] != x[_DETECTOR_ID]
-        detectors_turn = gentle and (
-            (x[_TURN] > x[_LAST_FORCED] and t - x[_TURN] < self._max_hold)
-            or (pending and x[_TURN] <= x[_LAST_FORCED]))
         overdue = (identifying and (x[_HAS_OBSERVED] > 0 or asked) and t - x[_NEAR_SINCE] >= hold
-                   and t - x[_LAST_FORCED] >= hold and not detectors_turn)
+                   and t - x[_LAST_FORCED] >= hold)
         on_its_way = (t - x[_LAST_FORCED] < hold
                       and np.max(np.abs(q - x[self._request + 1:])) > _REACHED)
         waits = identifying and (overdue or on_its_way)
-        if pending and not waits:  # the detector's first (body detection, §3.3)
-            if x[_TURN] <= x[_LAST_FORCED]:
-                x[_TURN] = t
+        if request[0] != x[_DETECTOR_ID] and not waits:  # the detector's first (body detection, §3.3)
             x[_DETECTOR_ID] = request[0]
             x[_ID] += 1
             x[_LAST_TIME] = t
             x[self._request:] = request[1:]
-        elif identifying and (overdue or (t - x[_LAST_TIME] >= self._interval and not pending
-                                          and not detectors_turn)):  # none pending
+        elif identifying and (overdue or (t - x[_LAST_TIME] >= self._interval
+                                          and request[0] == x[_DETECTOR_ID])):  # none pending
             rng = np.random.default_rng([self._seed, int(x[_OWN])])
             low, high = self._ranges[:, 0], self._ranges[:, 1]
             if gentle:
@@ -161,7 +145,7 @@ class IdentifyingMotion(LeafSystem):
             x[_ID] += 1
             x[_OWN] += 1
             x[_LAST_TIME] = t
-            if overdue or gentle:  # a posture within reach is always a turn of its own
+            if overdue:
                 x[_LAST_FORCED] = t
             x[self._request] = -1.0  # a usual move after the rest there
             x[self._request + 1:] = far
