@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from eye_to_hand_data import make_samples, make_truth, rotation_error_deg
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
@@ -154,6 +154,9 @@ anything = st.floats(allow_nan=True, allow_infinity=True)
 
 
 @settings(max_examples=60, deadline=None)
+@example(samples=[([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [133705730176444.0, 0.0, 0.0]),
+                  ([0.0, 0.0, 3.382577463982276e-140], [0.0, 0.0, 0.0, 0.0], [133705730176444.0, 0.0, 0.0])],
+         forgetting=0.9)  # a * a overflowed to a NaN expected error
 @given(
     samples=st.lists(
         st.tuples(

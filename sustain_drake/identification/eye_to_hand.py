@@ -481,11 +481,12 @@ class EyeToHandIdentifier(FormulationIdentifier):
         direction = eigen.direction
         R, a, ssd, _ = _projection_parts(direction[0:9])
         x = a * direction
-        if a == 0.0 or not math.isfinite(sum(x.tolist())):
+        # A rotation block so small that a * a overflows is zero to the precision of the solve.
+        expected_mse = a * a * eigen.lambda_N
+        if a == 0.0 or not math.isfinite(sum(x.tolist())) or not math.isfinite(expected_mse):
             verdict = Verdict(False, "the rotation block of v_N is zero: no rotation to identify")
             verdict = _judge_eye_to_hand(self.criteria, core._S, core.weight, n, eigen, None, verdict)
             return EyeToHandSolution(eigen, 0.0, math.inf, math.inf, None, None, verdict, n)
-        expected_mse = a * a * eigen.lambda_N
         projected = EyeToHandEstimate(R, x[9:12], x[12:15], x, expected_mse)
         expected_rms = math.sqrt(expected_mse)
         verdict = judge(self.criteria, n, eigen, expected_rms, None, ssd, " m")
