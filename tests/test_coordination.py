@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import coordination
 from sustain_drake.identification.coordination import CoordinationRule
+from sustain_drake.identification.coordination import IdentifierReport as Report
 from sustain_drake.loops.identify_observe import connect_identify_observe
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.sustainable_identifier_system import (
@@ -26,7 +27,7 @@ def run_rule(signals, state=None):
     state = coordination.initial_state() if state is None else state
     events = []
     for k, (conv, mse, count, err) in enumerate(signals):
-        state, event = coordination.step(state, RULE, k * 0.1, conv, mse, count, err)
+        state, event = coordination.step(state, RULE, k * 0.1, Report(conv, mse, count, err))
         if event:
             events.append(event)
     return state, events
@@ -72,14 +73,14 @@ def test_the_sensor_noise_floors_the_allowable_error():
     """Near noise-free data: a^2 lambda_N is round-off (1e-20 m^2); without a floor every sample
     would violate. With the sensor's noise (1 mm) as the floor, sigma = 100 (1 mm)^2."""
     rule = CoordinationRule(noise_rms=1e-3)
-    state, event = coordination.step(coordination.initial_state(), rule, 0.0, True, 1e-20, 1, 0.0)
+    state, event = coordination.step(coordination.initial_state(), rule, 0.0, Report(True, 1e-20, 1, 0.0))
     assert event.kind == coordination.CONVERGED
     assert state[coordination.SIGMA] == pytest.approx(100 * 1e-6)
     assert coordination.allowable_error(rule, 1e-20) == pytest.approx(1e-4)
     assert coordination.allowable_error(rule, 4e-6) == pytest.approx(4e-4)  # above the floor: the paper's
     assert coordination.allowable_error(RULE, 1e-20) == pytest.approx(1e-18)  # no floor: the paper's rule
     for k in range(20):  # 5 mm per sample: noise, not a change
-        state, event = coordination.step(state, rule, 0.1 * (k + 1), True, 1e-20, 2 + k, 25e-6)
+        state, event = coordination.step(state, rule, 0.1 * (k + 1), Report(True, 1e-20, 2 + k, 25e-6))
         assert event is None
     assert state[coordination.MODE] == coordination.OBSERVE
 
@@ -90,17 +91,17 @@ def test_a_refinement_is_adopted_in_observe_only_when_the_rule_says_so():
     (the default) keeps the model fixed."""
     for adopt in (True, False):
         rule = CoordinationRule(adopt_refinements=adopt)
-        state, _ = coordination.step(coordination.initial_state(), rule, 0.0, True, 4e-6, 1, 0.0)
-        state, _ = coordination.step(state, rule, 0.1, True, 4e-6, 2, 5e-4)  # one violation
-        state, event = coordination.step(state, rule, 0.2, True, 1e-6, 3, 0.0, refinement=1)
+        state, _ = coordination.step(coordination.initial_state(), rule, 0.0, Report(True, 4e-6, 1, 0.0))
+        state, _ = coordination.step(state, rule, 0.1, Report(True, 4e-6, 2, 5e-4))  # one violation
+        state, event = coordination.step(state, rule, 0.2, Report(True, 1e-6, 3, 0.0, refinement=1))
         assert state[coordination.MODE] == coordination.OBSERVE
         if adopt:
             assert event.kind == coordination.REFINED and event.time == pytest.approx(0.2)
             assert state[coordination.SIGMA] == pytest.approx(1e-4) and state[coordination.VIOLATIONS] == 0
             # The same refinement again, or a solution that is not converged: nothing.
-            state, event = coordination.step(state, rule, 0.3, True, 1e-6, 4, 0.0, refinement=1)
+            state, event = coordination.step(state, rule, 0.3, Report(True, 1e-6, 4, 0.0, refinement=1))
             assert event is None
-            state, event = coordination.step(state, rule, 0.4, False, 1e-6, 5, 0.0, refinement=2)
+            state, event = coordination.step(state, rule, 0.4, Report(False, 1e-6, 5, 0.0, refinement=2))
             assert event is None
         else:
             assert event is None and state[coordination.SIGMA] == pytest.approx(4e-4)
@@ -216,10 +217,10 @@ def test_a_stale_solution_after_a_detection_is_not_adopted():
     assert [e.kind for e in events] == [coordination.CHANGE_DETECTED]
     detected_at = 11
     for k in range(1, 4):
-        state, event = coordination.step(state, RULE, 2.0 + k, True, 1e-6, detected_at + k, 0.0, 500)
+        state, event = coordination.step(state, RULE, 2.0 + k, Report(True, 1e-6, detected_at + k, 0.0, 500))
         assert event is None and state[coordination.MODE] == coordination.IDENTIFY
     # A fresh solution (its samples all came after the detection) is adopted.
-    state, event = coordination.step(state, RULE, 6.0, True, 1e-6, detected_at + 20, 0.0, 12)
+    state, event = coordination.step(state, RULE, 6.0, Report(True, 1e-6, detected_at + 20, 0.0, 12))
     assert event.kind == coordination.CONVERGED and state[coordination.MODE] == coordination.OBSERVE
 
 
@@ -232,29 +233,32 @@ def test_a_camera_move_is_a_change_detection_and_keeps_the_identifier_reset_whil
     # Moves count constant (0): the paper's rule, as without the input.
     same, events = state, []
     for k in range(5):
-        same, event = coordination.step(same, RULE, 0.1 * k, True, 1e-6, 2 + k, ok, camera_moves=0)
+        same, event = coordination.step(same, RULE, 0.1 * k, Report(True, 1e-6, 2 + k, ok), camera_moves=0)
         events += [event] if event else []
     assert not events and same[coordination.MODE] == coordination.OBSERVE
     # A new move: detected at once, with its time, like the rule's detection.
-    state, event = coordination.step(same, RULE, 1.0, True, 1e-6, 7, ok, camera_moving=True, camera_moves=1)
+    state, event = coordination.step(same, RULE, 1.0, Report(True, 1e-6, 7, ok),
+                                     camera_moving=True, camera_moves=1)
     assert event.kind == coordination.CHANGE_DETECTED and event.time == pytest.approx(1.0)
     assert event.detail == coordination.CAMERA_MOVED_DETAIL
     assert state[coordination.MODE] == coordination.IDENTIFY and state[coordination.RESET_COUNT] == 1
     assert state[coordination.DETECTIONS] == 1
     # While it moves: reset on every tick, a converged (fresh) solution is not adopted.
     for k in range(3):
-        state, event = coordination.step(state, RULE, 1.1 + 0.1 * k, True, 1e-6, 8 + k, ok, 1,
+        state, event = coordination.step(state, RULE, 1.1 + 0.1 * k, Report(True, 1e-6, 8 + k, ok, 1),
                                          camera_moving=True, camera_moves=1)  # fmt: skip
         assert event is None and state[coordination.RESET_COUNT] == 2 + k
         assert state[coordination.MODE] == coordination.IDENTIFY
     # At rest: the next fresh converged solution is adopted; a stale one (samples from before) not.
-    state, event = coordination.step(state, RULE, 1.5, True, 1e-6, 11, ok, 5, camera_moves=1)
+    state, event = coordination.step(state, RULE, 1.5, Report(True, 1e-6, 11, ok, 5), camera_moves=1)
     assert event is None  # 5 samples, but only 1 arrived since the last reset
-    state, event = coordination.step(state, RULE, 1.6, True, 1e-6, 12, ok, 2, camera_moves=1)
+    state, event = coordination.step(state, RULE, 1.6, Report(True, 1e-6, 12, ok, 2), camera_moves=1)
     assert event.kind == coordination.CONVERGED and state[coordination.RESET_COUNT] == 4
     # A move while identifying: reset and detected too (a half-identified model is stale).
-    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, 0.0, camera_moves=0)
-    state, event = coordination.step(state, RULE, 0.1, False, 1.0, 2, 0.0, camera_moving=True, camera_moves=1)
+    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, Report(False, 1.0, 1, 0.0),
+                                 camera_moves=0)
+    state, event = coordination.step(state, RULE, 0.1, Report(False, 1.0, 2, 0.0),
+                                     camera_moving=True, camera_moves=1)
     assert event.kind == coordination.CHANGE_DETECTED and state[coordination.RESET_COUNT] == 1
 
 
@@ -311,25 +315,27 @@ def test_a_camera_move_clears_the_adopted_model():
 
 def _observing(body_changes=0):
     """A state in OBSERVE (sigma 1e-4) that has seen ``body_changes``, and the next sample count."""
-    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, 0.0,
+    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, Report(False, 1.0, 1, 0.0),
                                  body_changes=body_changes)  # fmt: skip
-    state, event = coordination.step(state, RULE, 0.1, True, 1e-6, 2, 0.0, body_changes=body_changes)
+    state, event = coordination.step(state, RULE, 0.1, Report(True, 1e-6, 2, 0.0), body_changes=body_changes)
     assert event.kind == coordination.CONVERGED
     return state, 3
 
 
 def test_a_body_change_reported_while_identifying_is_only_counted():
-    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, False, 1.0, 1, 0.0, body_changes=0)
-    state, event = coordination.step(state, RULE, 0.1, False, 1.0, 2, 0.0, body_changes=1)
+    state, _ = coordination.step(coordination.initial_state(), RULE, 0.0, Report(False, 1.0, 1, 0.0),
+                                 body_changes=0)
+    state, event = coordination.step(state, RULE, 0.1, Report(False, 1.0, 2, 0.0), body_changes=1)
     assert event is None and state[coordination.MODE] == coordination.IDENTIFY
     assert state[coordination.BODY_CHANGES] == 1 and state[coordination.BODY_PENDING] == -1
-    state, event = coordination.step(state, RULE, 0.2, True, 1e-6, 3, 0.0, body_changes=1)
+    state, event = coordination.step(state, RULE, 0.2, Report(True, 1e-6, 3, 0.0), body_changes=1)
     assert event.kind == coordination.CONVERGED
     for k in range(30):  # observing, the same count: nothing
-        state, event = coordination.step(state, RULE, 0.3 + 0.1 * k, True, 1e-6, 4 + k, 1e-8, body_changes=1)
+        state, event = coordination.step(state, RULE, 0.3 + 0.1 * k, Report(True, 1e-6, 4 + k, 1e-8),
+                                         body_changes=1)
         assert event is None and state[coordination.MODE] == coordination.OBSERVE
     with pytest.raises(coordination.IdentificationError, match="body_changes"):
-        coordination.step(state, RULE, 9.0, True, 1e-6, 40, 0.0, body_changes=-1)
+        coordination.step(state, RULE, 9.0, Report(True, 1e-6, 40, 0.0), body_changes=-1)
 
 
 @pytest.mark.parametrize("samples", ["within", "none"])
@@ -341,7 +347,8 @@ def test_a_body_change_the_camera_does_not_see_is_a_slip_after_the_rules_window(
     n = RULE.max_consecutive_violations
     for k in range(n):
         count += samples == "within"
-        state, event = coordination.step(state, RULE, 1.0 + 0.1 * k, True, 1e-6, count, 1e-8, body_changes=1)
+        state, event = coordination.step(state, RULE, 1.0 + 0.1 * k, Report(True, 1e-6, count, 1e-8),
+                                         body_changes=1)
         if k < n - 1:
             assert event is None and state[coordination.MODE] == coordination.OBSERVE
     assert event.kind == coordination.CHANGE_DETECTED and event.detail == coordination.BODY_CHANGED_DETAIL
@@ -359,10 +366,12 @@ def test_a_body_change_the_camera_sees_is_the_rules_detection():
     events = []
     for k in range(3):  # within the limit, then the report arrives with the first violation
         count += 1
-        state, event = coordination.step(state, RULE, 1.0 + 0.1 * k, True, 1e-6, count, 1e-8, body_changes=0)
+        state, event = coordination.step(state, RULE, 1.0 + 0.1 * k, Report(True, 1e-6, count, 1e-8),
+                                         body_changes=0)
     for k in range(RULE.max_consecutive_violations + 5):
         count += 1
-        state, event = coordination.step(state, RULE, 2.0 + 0.1 * k, False, 1e-6, count, 1.0, body_changes=1)
+        state, event = coordination.step(state, RULE, 2.0 + 0.1 * k, Report(False, 1e-6, count, 1.0),
+                                         body_changes=1)
         events += [event] if event else []  # not converged again: nothing to adopt after the detection
     assert [e.detail for e in events] == [f"{RULE.max_consecutive_violations} samples over the limit"]
     assert events[0].time == pytest.approx(2.0 + 0.1 * (RULE.max_consecutive_violations - 1))

@@ -76,6 +76,7 @@ CORE.add(np.eye(4))
 EIGEN = CORE.eigen()
 CRITERIA = ConvergenceCriteria(max_expected_rms=0.01)
 RULE = coordination.CoordinationRule()
+REPORT = coordination.IdentifierReport(True, 1e-6, 5, 1e-7)
 _anchor_rng = np.random.default_rng(4)
 B0 = _anchor_rng.normal(size=(12, 3))
 B0 /= np.linalg.norm(B0, axis=1, keepdims=True)
@@ -153,8 +154,8 @@ TARGETS = {
     "coordination.CoordinationRule": (coordination.CoordinationRule, (100.0, 10, 3.0, 0.0, False)),
     "coordination.allowable_error": (coordination.allowable_error, (RULE, 1e-6)),
     "coordination.initial_state": (coordination.initial_state, ()),
-    "coordination.step": (coordination.step,
-                          (coordination.initial_state(), RULE, 1.0, True, 1e-6, 5, 1e-7, 5, 0, False, None)),
+    "coordination.IdentifierReport": (coordination.IdentifierReport, (True, 1e-6, 5, 1e-7, 5, 0)),
+    "coordination.step": (coordination.step, (coordination.initial_state(), RULE, 1.0, REPORT, False, None)),
 }
 
 # Result records, not checked (built by the API itself), and the checks themselves.
@@ -360,9 +361,14 @@ BAD_CALLS = [
     _bad("coordination.step", 0, None, "state"),
     _bad("coordination.step", 1, None, "rule"),
     _bad("coordination.step", 2, np.inf, "time"),
-    _bad("coordination.step", 3, "yes", "converged"),
-    _bad("coordination.step", 5, -1, "sample_count"),
-    _bad("coordination.step", 10, -2, "camera_moves"),
+    _bad("coordination.IdentifierReport", 0, "yes", "converged"),
+    _bad("coordination.IdentifierReport", 1, "small", "expected_mse"),
+    _bad("coordination.IdentifierReport", 2, -1, "sample_count"),
+    _bad("coordination.IdentifierReport", 4, 2.5, "num_samples"),
+    _bad("coordination.IdentifierReport", 5, -1, "refinement"),
+    _bad("coordination.step", 3, (True, 1e-6, 5, 1e-7), "report"),
+    _bad("coordination.step", 4, "yes", "camera_moving"),
+    _bad("coordination.step", 5, -2, "camera_moves"),
 ]
 
 

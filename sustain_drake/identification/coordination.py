@@ -158,16 +158,50 @@ CAMERA_MOVED_DETAIL = "the camera moved"  # the detail of a change detected from
 BODY_CHANGED_DETAIL = "the held body changed (another sensor)"
 
 
+@dataclass(frozen=True)
+class IdentifierReport:
+    """What the identifier reports at one tick: its current solution's verdict and its newest sample.
+
+    Attributes:
+        converged: the identifier's current verdict.
+        expected_mse: the identifier's current ``a^2 lambda_N`` (NaN or inf: not converged).
+        sample_count: how many valid samples the identifier has seen in all (a new sample is a
+            change of this count).
+        sample_error: ``s_t`` of the newest sample under the ADOPTED estimate (OBSERVE only; NaN or
+            inf: a violation).
+        num_samples: the samples behind the identifier's solution, if known. After a change
+            detection the identifier applies the reset one update later, so for a tick or two it
+            still shows the old (converged) solution; a solution is only taken as the new
+            identification when it has no more samples than arrived since the detection.
+        refinement: the solution's refinement counter (``adopt_refinements``): in OBSERVE, a
+            converged solution with a higher counter than the adopted one is a refinement of it.
+
+    Raises IdentificationError naming the first field of the wrong type or value: ``converged``
+    not a bool, the errors not numbers, the counts not integers >= 0.
+    """
+
+    converged: bool
+    expected_mse: float
+    sample_count: int
+    sample_error: float
+    num_samples: int | None = None
+    refinement: int = 0
+
+    def __post_init__(self):
+        flag("converged", self.converged)
+        object.__setattr__(self, "expected_mse", real_number("expected_mse", self.expected_mse, finite=False))
+        integer("sample_count", self.sample_count, 0)
+        object.__setattr__(self, "sample_error", real_number("sample_error", self.sample_error, finite=False))
+        if self.num_samples is not None:
+            integer("num_samples", self.num_samples, 0)
+        integer("refinement", self.refinement, 0)
+
+
 def step(
     state: np.ndarray,
     rule: CoordinationRule,
     time: float,
-    converged: bool,
-    expected_mse: float,
-    sample_count: int,
-    sample_error: float,
-    num_samples: int | None = None,
-    refinement: int = 0,
+    report: IdentifierReport,
     camera_moving: bool = False,
     camera_moves: int | None = None,
     body_changes: int | None = None,
@@ -178,17 +212,7 @@ def step(
         state: the current state vector.
         rule: the thresholds.
         time: now, seconds (for the event).
-        converged: the identifier's current verdict.
-        expected_mse: the identifier's current ``a^2 lambda_N``.
-        sample_count: how many valid samples the identifier has seen in all (a new sample is a
-            change of this count).
-        sample_error: ``s_t`` of the newest sample under the ADOPTED estimate (OBSERVE only).
-        num_samples: the samples behind the identifier's solution, if known. After a change
-            detection the identifier applies the reset one update later, so for a tick or two it
-            still shows the old (converged) solution; a solution is only taken as the new
-            identification when it has no more samples than arrived since the detection.
-        refinement: the solution's refinement counter (``adopt_refinements``): in OBSERVE, a
-            converged solution with a higher counter than the adopted one is a refinement of it.
+        report: the identifier's solution and newest sample (``IdentifierReport``).
         camera_moving, camera_moves: the camera-motion detector's ``[moving, moves]`` (None: no
             detector, the paper's rule alone): a count above the last one seen is a new camera move.
         body_changes: how many changes of the held body another sensor has detected (None: none
@@ -198,13 +222,11 @@ def step(
             rule detects the change first (see the module docstring).
 
     Raises IdentificationError for an argument of the wrong type or value: ``state`` not a real
-    vector of STATE_SIZE, ``rule`` not a CoordinationRule, ``time`` not finite, ``converged`` and
-    ``camera_moving`` not bools, ``expected_mse`` and ``sample_error`` not numbers (NaN or inf:
-    not converged, a violation), the counts not integers >= 0.
+    vector of STATE_SIZE, ``rule`` not a CoordinationRule, ``report`` not an IdentifierReport,
+    ``time`` not finite, ``camera_moving`` not a bool, the counts not integers >= 0.
     """
-    state, expected_mse, sample_error = _checked_step_arguments(
-        state, rule, time, converged, expected_mse, sample_count, sample_error, num_samples, refinement,
-        camera_moving, camera_moves, body_changes)  # fmt: skip
+    state = _checked_step_arguments(state, rule, time, report, camera_moving, camera_moves, body_changes)
+    converged, expected_mse, sample_count = report.converged, report.expected_mse, report.sample_count
     new = state.copy()
     new_sample = sample_count != int(state[LAST_SAMPLE])
     new[LAST_SAMPLE] = sample_count
@@ -225,22 +247,23 @@ def step(
         if body_changes > state[BODY_CHANGES] and int(state[MODE]) == OBSERVE and state[BODY_PENDING] < 0:
             new[BODY_PENDING] = 0.0
     if int(state[MODE]) == IDENTIFY:
-        stale = num_samples is not None and num_samples > sample_count - state[RESET_SAMPLE]
+        stale = report.num_samples is not None and report.num_samples > sample_count - state[RESET_SAMPLE]
         if converged and math.isfinite(expected_mse) and not stale:
             new[MODE] = OBSERVE
             new[VIOLATIONS] = 0
             new[SIGMA] = _allowable_error(rule, expected_mse)
             new[PAUSE_ID] += 1
             new[CONVERGENCES] += 1
-            new[REFINEMENT] = refinement
+            new[REFINEMENT] = report.refinement
             return new, Event(time, CONVERGED, f"allowable error {new[SIGMA]:.3g}")
         return new, None
-    refined = refinement > state[REFINEMENT] and converged and math.isfinite(expected_mse)
+    refined = report.refinement > state[REFINEMENT] and converged and math.isfinite(expected_mse)
     if rule.adopt_refinements and refined:
-        new[REFINEMENT] = refinement
+        new[REFINEMENT] = report.refinement
         new[SIGMA] = _allowable_error(rule, expected_mse)
         new[VIOLATIONS] = 0
         return new, Event(time, REFINED, f"allowable error {new[SIGMA]:.3g}")
+    sample_error = report.sample_error
     violation = new_sample and (sample_error > state[SIGMA] or not math.isfinite(sample_error))
     if new_sample:
         new[VIOLATIONS] = new[VIOLATIONS] + 1 if violation else 0
@@ -255,26 +278,19 @@ def step(
     return new, None
 
 
-def _checked_step_arguments(state, rule, time, converged, expected_mse, sample_count, sample_error,
-                            num_samples, refinement, camera_moving, camera_moves, body_changes):  # fmt: skip
+def _checked_step_arguments(state, rule, time, report, camera_moving, camera_moves, body_changes):
     """``step``'s arguments checked (IdentificationError naming the first bad one); returns the state
-    as a float64 vector and the two errors as floats."""
+    as a float64 vector."""
     if not (type(state) is np.ndarray and state.dtype is F64 and state.shape == (STATE_SIZE,)):
         state = real_array("state", state, (STATE_SIZE,), finite=False)
     instance("rule", rule, CoordinationRule, "a CoordinationRule")
     real_number("time", time)
-    flag("converged", converged)
-    expected_mse = real_number("expected_mse", expected_mse, finite=False)
-    integer("sample_count", sample_count, 0)
-    sample_error = real_number("sample_error", sample_error, finite=False)
-    if num_samples is not None:
-        integer("num_samples", num_samples, 0)
-    integer("refinement", refinement, 0)
+    instance("report", report, IdentifierReport, "an IdentifierReport")
     flag("camera_moving", camera_moving)
     for name, count in (("camera_moves", camera_moves), ("body_changes", body_changes)):
         if count is not None:
             integer(name, count, 0)
-    return state, expected_mse, sample_error
+    return state
 
 
 def _detect_change(new: np.ndarray, sample_count: int, reason: int) -> np.ndarray:

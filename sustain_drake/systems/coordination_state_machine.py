@@ -140,10 +140,10 @@ class CoordinationStateMachine(LeafSystem):
             verdict = dict(converged=solution.verdict.converged, expected_mse=solution.expected_mse,
                            num_samples=int(solution.num_samples),
                            refinement=int(getattr(solution, "refinement", 0)))
-        new, event = coordination.step(
-            self._vector(context), self._rule, context.get_time(), sample_count=int(sample_count),
-            sample_error=float(sample_error), **verdict, **optional,
-        )  # fmt: skip
+        report = coordination.IdentifierReport(sample_count=int(sample_count),
+                                               sample_error=float(sample_error), **verdict)
+        new, event = coordination.step(self._vector(context), self._rule, context.get_time(), report,
+                                       **optional)
         state.get_mutable_discrete_state(self._state).set_value(new)
         if event is not None:
             state.get_mutable_abstract_state(self._events).set_value(self.events(context) + (event,))
