@@ -158,7 +158,8 @@ def hand_eye_parts(config: HandEyeConfig) -> HandEyeParts:
     # centrally symmetric points first, then (max_view_shift_sigmas) points fixed on their face, the
     # depth on the face's fitted plane (docs/hand_eye.md, "The points")
     refinement = RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3,
-                                  depth_plane=True, max_view_shift_sigmas=config.max_view_shift_sigmas)
+                                  depth_plane=True, max_view_shift_sigmas=config.max_view_shift_sigmas,
+                                  anchor_window_px=8)
     return HandEyeParts(config, coordination, candidates, refinement,
                         CameraMotionConfig(enabled=config.camera_motion))
 
@@ -236,7 +237,7 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     refinement = scaled(dataclasses.replace(parts.refinement), pixel_scale(info),
                         lengths=("max_shift_px",),
                         windows=("corner_window_px", "depth_window_px", "blob_window_px",
-                                 "symmetry_window_px"))
+                                 "symmetry_window_px", "anchor_window_px"))
     body = add_body_detection(builder, info, num_joints, fps, perception)
     tracker, detector, period = body.tracker, body.detector, 1.0 / fps
     formulation = EyeToHandFormulation(criteria, parts.coordination.forgetting_factor)
@@ -247,7 +248,9 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
     machine.set_name("coordination_state_machine")
     features, refiner = tracker.GetOutputPort("tracked_features"), None
     if hand_eye.refine_points:  # drift-free points for the identifiers (the detector keeps the tracks)
-        refiner = builder.AddSystem(FeatureRefiner(info, refinement, hand_eye.depth_noise))
+        # its update between the tracker's (a quarter frame) and the candidates' (the next frame)
+        refiner = builder.AddSystem(FeatureRefiner(info, refinement, hand_eye.depth_noise, period,
+                                                   offset=0.5 * period))
         refiner.set_name("feature_refiner")
         builder.Connect(features, refiner.GetInputPort("tracked_features"))
         features = refiner.GetOutputPort("tracked_features")

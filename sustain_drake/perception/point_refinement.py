@@ -70,12 +70,15 @@ class RefinementParams:
     # the focal length), farther than this many depth-noise sigmas at its depth is not fixed on the
     # hand, unless centrally symmetric (the symmetry test alone then lets no other point in); 0: off
     max_view_shift_sigmas: float = 0.0
+    # px: half side of the template each track's point is anchored to (perception.anchored_points:
+    # the point is where the track's first patch aligns each frame, not a corner); 0: off
+    anchor_window_px: int = 0
 
     def __post_init__(self):
         if not -1.0 <= self.min_symmetry <= 1.0:
             raise ValueError(f"min_symmetry must be in [-1, 1] ({self})")
         if (self.corner_window_px < 0 or self.depth_window_px < 0 or self.blob_window_px < 0
-                or self.symmetry_window_px < 0):
+                or self.symmetry_window_px < 0 or self.anchor_window_px < 0):
             raise ValueError(f"window sizes must be >= 0 ({self})")
         if not self.max_view_shift_sigmas >= 0:
             raise ValueError(f"max_view_shift_sigmas must be >= 0 ({self})")

@@ -16,6 +16,7 @@ from sustain_drake.identification.candidates import CandidateBank, CandidatePara
 from sustain_drake.identification.coordination import NO_RESET
 from sustain_drake.identification.eye_to_hand import N_UNKNOWNS
 from sustain_drake.identification.sustainable_identifier import Verdict
+from sustain_drake.perception.anchored_points import AnchoredTracks, refine_anchored
 from sustain_drake.perception.camera_motion import SceneTurn
 from sustain_drake.perception.free_space import depth_gap
 from sustain_drake.perception.optical_flow import TrackedFeatures
@@ -28,11 +29,10 @@ from sustain_drake.systems.sustainable_identifier_system import EyeToHandFormula
 
 
 class FeatureRefiner(LeafSystem):
-    """The tracked features with drift-free 3-D points (``perception.point_refinement``): each
-    feature's pixel moved to the image's sub-pixel corner near it, its depth a robust median on the
-    same surface. Put between an ``OpticalFlowTracker`` and ``CandidateIdentifiers``: a point fixed
-    on the hand (Eq. (30)) must be the same physical point in every frame, which a frame-to-frame
-    track is not (it drifts by millimetres over tens of seconds).
+    """The tracked features with drift-free 3-D points for the identifiers. Put between an
+    ``OpticalFlowTracker`` and ``CandidateIdentifiers``: a point fixed on the hand (Eq. (30)) must
+    be the same physical point in every frame, which a frame-to-frame track is not (it drifts by
+    millimetres over tens of seconds).
 
     .. pydrake_system::
 
@@ -49,13 +49,21 @@ class FeatureRefiner(LeafSystem):
     replaced (same ids and order, so a detector's body flags still match). The images must be the
     frame the features come from: when ``image_time`` (connected) differs from the features'
     ``time``, every feature is invalid for that evaluation (no point is better than a point from
-    another frame). ``depth_noise`` is the depth camera's noise model (``DepthNoiseModel``, its
-    default if None), which ``params.max_view_shift_sigmas`` is relative to. No state: the output
-    is a function of the inputs.
+    another frame).
+
+    With ``params.anchor_window_px`` > 0 each track's point is anchored to the patch the track saw
+    in its first frame (``perception.anchored_points``): the anchors are an abstract state updated
+    once per frame, ``period`` s apart from ``offset`` (between the tracker's update and the
+    reader's; the output is the last update's points, invalid for a frame it has not seen).
+    Otherwise each point is the sub-pixel corner near the tracked pixel
+    (``perception.point_refinement``), the output a function of the inputs with no state.
+    ``depth_noise`` is the depth camera's noise model (``DepthNoiseModel``, its default if None):
+    an anchor pins its point within it, and ``params.max_view_shift_sigmas`` is relative to it.
     """
 
     def __init__(self, camera_info: CameraInfo, params: RefinementParams | None = None,
-                 depth_noise: DepthNoiseModel | None = None):
+                 depth_noise: DepthNoiseModel | None = None, period: float = 1.0 / 30.0,
+                 offset: float = 0.5 / 30.0):
         super().__init__()
         self._intrinsics = intrinsics_from_camera_info(camera_info)
         self._params = params or RefinementParams()
@@ -65,8 +73,17 @@ class FeatureRefiner(LeafSystem):
         self._color = self.DeclareAbstractInputPort("color_image", AbstractValue.Make(ImageRgba8U()))
         self._depth = self.DeclareAbstractInputPort("depth_image", AbstractValue.Make(ImageDepth32F()))
         self._time = self.DeclareVectorInputPort("image_time", 1)
-        self.DeclareAbstractOutputPort(
-            "tracked_features", lambda: AbstractValue.Make(TrackedFeatures()), self._calc)
+        if self._params.anchor_window_px > 0:
+            # (the tracks' anchors and corners, the last frame's refined features)
+            self._anchors = self.DeclareAbstractState(AbstractValue.Make(
+                Shared((AnchoredTracks(), TrackedFeatures(time=-np.inf)))))
+            self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update_anchors)
+            self.DeclareAbstractOutputPort(
+                "tracked_features", lambda: AbstractValue.Make(TrackedFeatures()), self._calc_anchored,
+                prerequisites_of_calc={self.all_state_ticket(), self._features.ticket()})
+        else:
+            self.DeclareAbstractOutputPort(
+                "tracked_features", lambda: AbstractValue.Make(TrackedFeatures()), self._calc)
 
     @property
     def params(self) -> RefinementParams:
@@ -76,18 +93,49 @@ class FeatureRefiner(LeafSystem):
     def depth_noise(self) -> DepthNoiseModel:
         return self._depth_noise
 
-    def _calc(self, context, output) -> None:
+    def _frame(self, context):
+        """The features and their frame's images, or None when the images are not that frame's."""
         features = self._features.Eval(context)
-        same_frame = _same_frame(self._time, context, features.time)
         color, depth = self._color.Eval(context).data, self._depth.Eval(context).data
         shape_ok = color.shape[:2] == (self._intrinsics.height, self._intrinsics.width) == depth.shape[:2]
-        if len(features) == 0 or not (same_frame and shape_ok):
-            none = np.zeros(len(features), bool)
-            refined = RefinedPoints(np.zeros((len(features), 3)), none, features.p_px, none)
-        else:
-            refined = refine_features(color, depth, features.p_px, self._intrinsics, self._params,
-                                      depth_sigma=self._depth_noise.sigma)
+        if len(features) == 0 or not (_same_frame(self._time, context, features.time) and shape_ok):
+            return features, None, None
+        return features, color, depth
+
+    def _calc(self, context, output) -> None:
+        features, color, depth = self._frame(context)
+        if color is None:
+            output.set_value(_without_points(features))
+            return
+        refined = refine_features(color, depth, features.p_px, self._intrinsics, self._params,
+                                  depth_sigma=self._depth_noise.sigma)
         output.set_value(dataclasses.replace(features, **refined._asdict()))
+
+    def _update_anchors(self, context, state) -> None:
+        anchors, last = context.get_abstract_state(int(self._anchors)).get_value().value
+        features, color, depth = self._frame(context)
+        if len(features) and features.time <= last.time:
+            return
+        if color is None:  # no image of this frame: no points, and the anchors wait for the next
+            refined = _without_points(features)
+        else:
+            anchors, points = refine_anchored(anchors, color, depth, features.ids, features.p_px,
+                                              self._intrinsics, self._params, self._depth_noise.sigma)
+            refined = dataclasses.replace(features, **points._asdict())
+        state.get_mutable_abstract_state(int(self._anchors)).set_value(Shared((anchors, refined)))
+
+    def _calc_anchored(self, context, output) -> None:
+        features = self._features.Eval(context)
+        _, last = context.get_abstract_state(int(self._anchors)).get_value().value
+        same = last.time == features.time and np.array_equal(last.ids, features.ids)
+        output.set_value(last if same else _without_points(features))
+
+
+def _without_points(features: TrackedFeatures) -> TrackedFeatures:
+    """The features with no point (every ``valid`` and ``symmetric`` False)."""
+    none = np.zeros(len(features), bool)
+    return dataclasses.replace(features, **RefinedPoints(np.zeros((len(features), 3)), none,
+                                                         features.p_px, none.copy())._asdict())
 
 
 def _same_frame(image_time_port, context, features_time: float) -> bool:

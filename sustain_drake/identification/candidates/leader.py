@@ -55,6 +55,11 @@ def choose(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCr
     # the statistics, and so its lever, are as they were.
     converged = ([] if pool.leader >= 0 or (bank.held_back >= 0 and not pool.fed and not adopt_held)
                  else [c for c in pool.kept if c.solution.verdict.converged])
+    # Precise points first: while a centrally symmetric point is a candidate, only such a point
+    # leads. A point anchored on its patch (a second choice) carries a view-dependent bias of a
+    # tenth of a pixel or more on fine print, which the fit's noise cannot show.
+    if any(c.symmetric for c in pool.kept):
+        converged = [c for c in converged if c.symmetric]
     forgetting_factor = seen.given.forgetting_factor
     if converged:
         if adopt_held:
