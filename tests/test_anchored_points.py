@@ -56,12 +56,12 @@ def test_the_anchored_point_stays_on_the_plane_point_where_its_track_began():
         anchors, out = anchor_step(anchors, view(tex, homography(f)), FLAT, ids, track, np.ones(20),
                                    HALF, TOLERANCE, max_sd_px=0.1)
         if f == 0:
-            first = track.copy()
+            first = track + anchors.points  # each anchor's point: the patch point it pins best
             assert not out.pinned.any()  # a new anchor's own frame says nothing of it yet
             continue
         assert out.pinned.all() and (out.correlation > 0.97).all()
         error = np.linalg.norm(out.p_px - apply(homography(f), first), axis=1)
-        assert error.max() < 0.1, f"frame {f}: anchored points {error.max():.3f} px off"
+        assert np.median(error) < 0.05 and error.max() < 0.15, f"frame {f}: {error.max():.3f} px off"
     assert np.linalg.norm(track - apply(homography(49), first), axis=1).min() > 1.5  # the track drifted
 
 
@@ -88,10 +88,11 @@ def test_the_background_behind_a_silhouette_is_not_part_of_the_template():
         return image.astype(np.uint8)
 
     anchors, _ = anchor_step(Anchors(), frame(0), depth, [3], p, [0.8], HALF, TOLERANCE, max_sd_px=0.2)
+    point = p[0] + anchors.points[0]
     for shift in (3, 6, 9):  # the background slides behind the still tool
         anchors, out = anchor_step(anchors, frame(shift), depth, [3], p, [0.8], HALF, TOLERANCE,
                                    max_sd_px=0.2)
-        assert out.pinned[0] and np.linalg.norm(out.p_px[0] - p[0]) < 0.05
+        assert out.pinned[0] and np.linalg.norm(out.p_px[0] - point) < 0.05
 
 
 def test_an_occluded_patch_ends_its_anchor_for_good():
@@ -135,9 +136,9 @@ def test_refine_anchored_back_projects_pinned_points_with_the_depth_noise_gate()
     assert not first.valid.any() and not np.any(first.p_CP)
     anchors, out = refine_anchored(anchors, tex, depth, [1, 2], p + 0.3, K, params, sigma)
     assert out.valid.all() and not out.symmetric.any()  # anchored points: the second choice
-    assert np.allclose(out.p_px, p, atol=0.02)  # the anchors, not the tracks' 0.3 px
+    assert np.allclose(out.p_px, p + anchors.anchors.points, atol=0.02)  # the anchors, not the tracks' 0.3 px
     assert out.p_CP[:, 2] == pytest.approx([0.7, 0.7], abs=1e-4)
-    assert out.p_CP[0, 0] == pytest.approx((100.0 - K.cx) * 0.7 / K.fx, abs=1e-4)
+    assert out.p_CP[0, 0] == pytest.approx((out.p_px[0, 0] - K.cx) * 0.7 / K.fx, abs=1e-4)
     # With no depth at a point it is not valid, never NaN.
     holes = depth.copy()
     holes[150:170, 190:210] = np.nan
@@ -185,12 +186,46 @@ def test_feature_refiner_keeps_its_anchors_in_the_context():
     out = refiner.GetOutputPort("tracked_features").Eval(context)
     assert not out.valid.any()  # no update has seen this frame yet
     simulator = Simulator(refiner, context)
+    points = []
     for f in range(1, 6):
         simulator.AdvanceTo((f - 1 + 0.6) * period)  # the update of frame f - 1 has run
         shift = show(f, simulator.get_mutable_context())
         simulator.AdvanceTo((f + 0.6) * period)
         out = refiner.GetOutputPort("tracked_features").Eval(simulator.get_context())
-        assert out.valid[0] and np.linalg.norm(out.p_px[0] - apply(shift, p0)[0]) < 0.05
+        assert out.valid[0]
+        points.append(out.p_px[0] - apply(shift, p0)[0])  # the anchor's point, moved with the image
+    assert np.ptp(np.array(points), axis=0).max() < 0.05
     clone = simulator.get_context().Clone()  # the anchors are in the context, not the system
     assert refiner.GetOutputPort("tracked_features").Eval(clone).valid[0]
     assert dataclasses.replace(out).ids.tolist() == [5]
+
+
+def test_a_track_begun_on_a_checker_saddle_keeps_the_saddle_and_others_are_anchored():
+    """The kinds are fixed where a track is first seen: a centrally symmetric corner stays that
+    corner (refined each frame, valid only while still symmetric, never anchored), any other point
+    is anchored on its patch (the second choice)."""
+    v, u = np.mgrid[0:H, 0:W]
+    saddle = (80.5, 120.5)  # between pixels: a hard-edged checker puts it there exactly
+    light = (np.floor((u - saddle[0]) / 9.0) + np.floor((v - saddle[1]) / 9.0)) % 2 == 0
+    image = np.where(light, 220.0, 30.0).astype(np.float32)
+    image[:, 160:] = texture()[:H, 160:W]  # print on the right half
+    image = image.astype(np.uint8)
+    depth = np.full((H, W), 0.7, np.float32)
+    params = RefinementParams(anchor_window_px=HALF, corner_window_px=4, max_shift_px=4.0,
+                              symmetry_window_px=3, depth_plane=True)
+    sigma = lambda z: 0.001 + 0.0 * z  # noqa: E731
+    tracked = np.array([[saddle[0] + 1.2, saddle[1] - 0.8], [220.0, 140.0]])  # print: not symmetric
+    tracks, out = refine_anchored(AnchoredTracks(), image, depth, [1, 2], tracked, K, params, sigma)
+    assert tracks.saddles.tolist() == [1] and tracks.anchors.ids.tolist() == [2]
+    assert out.valid.tolist() == [True, False] and out.symmetric.tolist() == [True, False]
+    assert np.linalg.norm(out.p_px[0] - saddle) < 0.15
+    tracks, out = refine_anchored(tracks, image, depth, [1, 2], tracked + 0.2, K, params, sigma)
+    assert out.valid.tolist() == [True, True] and out.symmetric.tolist() == [True, False]
+    anchor = tracked[1] + tracks.anchors.points[0]
+    assert np.linalg.norm(out.p_px[1] - anchor) < 0.05  # the anchor, not the track's 0.2 px
+    # The saddle covered by a flat patch: no point, and it does not become an anchored one.
+    covered = image.copy()
+    covered[100:140, 60:100] = 128
+    tracks, out = refine_anchored(tracks, covered, depth, [1, 2], tracked, K, params, sigma)
+    assert out.valid.tolist() == [False, True] and tracks.saddles.tolist() == [1]
+    assert tracks.anchors.ids.tolist() == [2]

@@ -1048,3 +1048,22 @@ def test_the_joint_refinement_leaves_out_second_choice_points_when_two_symmetric
     # A symmetric leader alone, or none at all: every member joins.
     assert candidates.fitting.first_choice(weak, symmetric[0]) == weak
     assert candidates.fitting.first_choice(symmetric[1:] + weak, weak[0]) == symmetric[1:] + weak
+
+
+def test_a_symmetric_candidate_leads_before_second_choice_points_that_converged_cleaner():
+    """Precise points first (``leader.choose``): while a centrally symmetric point is a candidate, a
+    second-choice point (anchored on its patch) does not lead, however clean its own fit; without
+    one, the first to converge leads whatever its kind."""
+    p_weak = [P_TOOL + [0.02 * i, -0.01, 0.01] for i in range(1, 3)]
+
+    def frames(k, X, rng, flags=True):
+        if k >= 400:
+            return None
+        points = [seen(X, P_TOOL, rng)] + [seen(X, p, rng, noise=0.05e-3) for p in p_weak]
+        out = [1, 10, 11], points, [True] * 3, [True] * 3
+        return (*out, [True, False, False]) if flags else out
+
+    bank, _ = run(frames)
+    assert [a.feature_id for a in bank.adoptions] == [1]
+    bank, _ = run(lambda k, X, rng: frames(k, X, rng, flags=False))
+    assert [a.feature_id for a in bank.adoptions] in ([10], [11])

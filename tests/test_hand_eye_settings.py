@@ -34,16 +34,15 @@ def test_the_noise_floor_is_the_sensors_sigma_rounded_up():
 def test_the_user_settings_reach_their_parts():
     config = HandEyeConfig(max_hand_radius=0.9, tool_radius=0.05, min_samples=120, max_expected_rms=0.004,
                            allowable_error_factor=50.0, max_consecutive_violations=7,
-                           pause_after_convergence=2.0, max_candidates=5, camera_motion=False,
-                           max_view_shift_sigmas=2.0)  # fmt: skip
+                           pause_after_convergence=2.0, max_candidates=5, camera_motion=False)
     parts = hand_eye_parts(config)
     c, k, r = parts.coordination, parts.candidates, parts.refinement
     assert (c.min_samples, c.max_expected_rms, c.allowable_error_factor) == (120, 0.004, 50.0)
     assert (c.max_consecutive_violations, c.pause_after_convergence) == (7, 2.0)
     assert (k.max_hand_radius, k.observe_radius, k.max_candidates) == (0.9, 0.05, 5)
-    assert r.max_view_shift_sigmas == 2.0 and not parts.camera_motion.enabled
+    assert not parts.camera_motion.enabled and r.anchor_window_px == 8 and r.symmetry_window_px == 3
     default = hand_eye_parts(HandEyeConfig())
-    assert default.refinement.max_view_shift_sigmas == 0.0 and default.camera_motion.enabled
+    assert default.camera_motion.enabled
     assert default.candidates.observe_radius == 0.1 and default.coordination.min_samples == 250
 
 

@@ -43,7 +43,7 @@ class HandEyeConfig:
     with (docs/results.md)."""
 
     enabled: bool = False  # run the hand-eye experiment on the scenario's world
-    # the depth sensor's noise sigma(z), m: sets the allowable error's floor and the view-shift gate
+    # the depth sensor's noise sigma(z), m: the allowable error's floor, how closely a point must be pinned
     depth_noise: DepthNoiseModel = field(default_factory=DepthNoiseModel)
     max_hand_radius: float = 0.6  # m: farthest a tracked point on the hand or its tool lies from the hand
     tool_radius: float = 0.1  # m: points this near the tool point in H are the tool's (a slip moves them)
@@ -62,9 +62,6 @@ class HandEyeConfig:
     # rad (max-norm) from the arm's posture that the postures asked for more motion keep to; 0: anywhere
     identifying_motion_reach: float = 0.1
     refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
-    # depth sigmas a 45 deg tilt may move a non-symmetric point on its face and keep it (a second
-    # choice: used where fewer than two symmetric points are); 0: symmetric points only
-    max_view_shift_sigmas: float = 0.0
     # the wrist wrench's payload identification (dynamic mode) watches the held tool: its change
     # detection is a slip, found while no tracked point shows it (needs a wrist force/torque sensor)
     slip_from_wrench: bool = True
@@ -154,12 +151,11 @@ def hand_eye_parts(config: HandEyeConfig) -> HandEyeParts:
         # the camera's 95 % region within the hand-eye targets (2 mm, 0.2 deg) before adoption
         camera_accuracy=0.002, camera_rotation_accuracy=math.radians(0.2),
     )  # fmt: skip
-    # cornerSubPix with a 9 x 9 window (Shi-Tomasi's 7 px block puts a corner ~2.5 px inside it),
-    # centrally symmetric points first, then (max_view_shift_sigmas) points fixed on their face, the
-    # depth on the face's fitted plane (docs/hand_eye.md, "The points")
+    # Centrally symmetric corners first (cornerSubPix with a 9 x 9 window: Shi-Tomasi's 7 px block
+    # puts a corner ~2.5 px inside it), then points anchored on a 17 x 17 patch where their track
+    # began; the depth on the face's fitted plane (docs/hand_eye.md, "The points")
     refinement = RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3,
-                                  depth_plane=True, max_view_shift_sigmas=config.max_view_shift_sigmas,
-                                  anchor_window_px=8)
+                                  depth_plane=True, anchor_window_px=8)
     return HandEyeParts(config, coordination, candidates, refinement,
                         CameraMotionConfig(enabled=config.camera_motion))
 

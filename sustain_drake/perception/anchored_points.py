@@ -53,11 +53,15 @@ MAX_ITERATIONS = 12
 MIN_CORRELATION = 0.9
 # px: the radius about a template's centre whose pixels seed the fit of its face's plane
 FACE_SEED_PX = 3.0
+# grey levels (of 255), 1 sd: the camera's pixel noise, the floor of an alignment's residual (a
+# rendered image has none but its quantisation, 0.3; a camera's is 1-3)
+PIXEL_NOISE = 1.0
 # Least fraction of the template's pixels on the centre's surface (else no anchor is made): a
 # quarter leaves a 17 x 17 template 72 pixels for its six warp parameters.
 MIN_MASK_FRACTION = 0.25
-# px: the image is smoothed by a Gaussian of this sigma before templates are cut and aligned (the
-# renderer's and a sensor's aliasing of fine texture changes with the view; smoothing removes it)
+# px: the image is smoothed by a Gaussian of this sigma before templates are cut and aligned: the
+# alignment samples it between pixels (bilinear), which on sharp print and a renderer's aliased
+# edges moves a patch by a phase-dependent tenth of a pixel; a band-limited image samples true
 BLUR_SIGMA_PX = 1.0
 # px per frame: the largest correction of a track's predicted centre that is still the same anchor
 # (a track that jumps has found another patch).
@@ -80,6 +84,8 @@ class Anchors:
     - ``warps``: K x 2 x 3, template coordinates (offsets from its centre, px) -> image pixels.
     - ``track_px``: K x 2, the track's own pixel when last aligned (to predict the next frame).
     - ``alive``: K, False once an alignment failed (the id never gets an anchor again).
+    - ``contrast``: K, the template's RMS contrast over its mask before normalising, grey levels.
+    - ``points``: K x 2, the anchor's point in template coordinates (``best_point``).
     """
 
     ids: np.ndarray = _empty(0, np.int64)
@@ -90,6 +96,8 @@ class Anchors:
     warps: np.ndarray = _empty((0, 2, 3))
     track_px: np.ndarray = _empty((0, 2))
     alive: np.ndarray = _empty(0, bool)
+    contrast: np.ndarray = _empty(0)
+    points: np.ndarray = _empty((0, 2))
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
@@ -98,7 +106,8 @@ class Anchors:
         return Anchors(*(getattr(self, name)[rows] for name in _FIELDS))
 
 
-_FIELDS = ("ids", "templates", "masks", "hessian_inv", "steepest", "warps", "track_px", "alive")
+_FIELDS = ("ids", "templates", "masks", "hessian_inv", "steepest", "warps", "track_px", "alive", "contrast",
+           "points")
 
 
 @dataclass(frozen=True)
@@ -224,8 +233,34 @@ def make_anchors(gray: np.ndarray, depth: np.ndarray, ids: np.ndarray, p_px: np.
     hessian_inv = np.zeros_like(hessian)
     if alive.any():
         hessian_inv[alive] = np.linalg.inv(hessian[alive])
+    points = np.zeros((k, 2))
+    if alive.any():
+        points[alive] = best_point(hessian_inv[alive], 0.5 * half)
     return Anchors(np.asarray(ids, np.int64), templates.astype(np.float32), masks, hessian_inv,
-                   steepest.astype(np.float32), warps, p.copy(), alive)
+                   steepest.astype(np.float32), warps, p.copy(), alive, contrast.astype(float), points)
+
+
+def _point_jacobian(c: np.ndarray) -> np.ndarray:
+    """K x 2 x 6: d W(c; p) / dp at p = 0 for template points ``c`` (K x 2)."""
+    J = np.zeros((c.shape[0], 2, 6))
+    J[:, 0, 0] = J[:, 1, 1] = c[:, 0]
+    J[:, 0, 2] = J[:, 1, 3] = c[:, 1]
+    J[:, 0, 4] = J[:, 1, 5] = 1.0
+    return J
+
+
+def best_point(hessian_inv: np.ndarray, reach: float) -> np.ndarray:
+    """The template point (K x 2, px from its centre, within ``reach`` of it) whose position the
+    affine alignment determines best: the minimum of ``trace(J_c H^-1 J_c^T)`` over ``c``, a
+    quadratic. Any point fixed in the template is fixed on the surface; the template's centre is
+    only one of them, and where the texture lies to one side of it, its position trades off
+    against the warp's shear and scale (a small change of appearance, such as a pixel's footprint
+    turning with the view, then moves it by a pixel or more while the match stays at 0.999)."""
+    u, v = hessian_inv[:, [0, 2, 4]][:, :, [0, 2, 4]], hessian_inv[:, [1, 3, 5]][:, :, [1, 3, 5]]
+    M = u + v
+    c = -np.linalg.solve(M[:, :2, :2], M[:, :2, 2:3])[:, :, 0]
+    norm = np.linalg.norm(c, axis=1, keepdims=True)
+    return np.where(norm > reach, c * reach / np.maximum(norm, 1e-12), c)
 
 
 def align(gray: np.ndarray, anchors: Anchors, predicted: np.ndarray, half: int):
@@ -263,10 +298,14 @@ def align(gray: np.ndarray, anchors: Anchors, predicted: np.ndarray, half: int):
     weight = anchors.masks.sum(axis=(1, 2))
     correlation = (normalised * anchors.templates).sum(axis=(1, 2)) / np.maximum(weight, 1.0)
     residual = ((normalised - anchors.templates) ** 2).sum(axis=(1, 2)) / np.maximum(weight - 9.0, 1.0)
-    # The centre's covariance in template coordinates (p5, p6), then in the image (A C A^T).
-    translation = anchors.hessian_inv[:, 4:6, 4:6] * residual[:, None, None]
+    # Never below the camera's own pixel noise (a clean match of a noiseless image is no proof that a
+    # patch pins its centre: along an edge it does not, whatever the residual).
+    residual = np.maximum(residual, (PIXEL_NOISE / np.maximum(anchors.contrast, 1e-6)) ** 2)
+    # The anchor's point's covariance in template coordinates (J_c H^-1 J_c^T), then in the image.
+    J = _point_jacobian(anchors.points)
+    point_cov = J @ anchors.hessian_inv @ np.transpose(J, (0, 2, 1)) * residual[:, None, None]
     linear = warps[:, :, :2]
-    image_cov = linear @ translation @ np.transpose(linear, (0, 2, 1))
+    image_cov = linear @ point_cov @ np.transpose(linear, (0, 2, 1))
     sd = np.sqrt(np.maximum(np.linalg.eigvalsh(image_cov)[:, -1], 0.0)) if k else np.zeros(0)
     correlation = np.where(valid, correlation, -1.0)
     sd = np.where(valid, sd, np.inf)
@@ -281,7 +320,7 @@ def anchor_step(anchors: Anchors, gray: np.ndarray, depth: np.ndarray, ids: np.n
     (``make_anchors``) for new tracks, and those of ended tracks dropped. An aligned point is pinned
     when its centre's sd is at most ``max_sd_px`` (K or one value, px). Returns the new anchors and
     each track's ``AnchoredPixels``."""
-    g = np.asarray(gray, np.float32)
+    g = cv2.GaussianBlur(np.asarray(gray, np.float32), (0, 0), BLUR_SIGMA_PX)
     ids = np.asarray(ids, np.int64)
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
     k = ids.shape[0]
@@ -307,10 +346,10 @@ def anchor_step(anchors: Anchors, gray: np.ndarray, depth: np.ndarray, ids: np.n
         new_warps[live] = np.where(ok[:, None, None], warps, old.warps[live])
         track_px = old.track_px.copy()
         track_px[live] = p[rows[live]]
-        old = Anchors(old.ids, old.templates, old.masks, old.hessian_inv, old.steepest, new_warps,
-                      track_px, alive)
+        old = dataclasses.replace(old, warps=new_warps, track_px=track_px, alive=alive)
         target = rows[live]
-        out_px[target] = np.where(ok[:, None], warps[:, :, 2], p[target])
+        at_point = np.einsum("kij,kj->ki", warps[:, :, :2], current.points) + warps[:, :, 2]
+        out_px[target] = np.where(ok[:, None], at_point, p[target])
         sd[target], correlation[target] = centre_sd, corr
         pinned[target] = ok & (centre_sd <= np.broadcast_to(max_sd_px, (k,))[target])
     fresh_rows = np.flatnonzero(~known)
@@ -356,16 +395,13 @@ def refine_anchored(tracks: AnchoredTracks, image: np.ndarray, depth: np.ndarray
     the corners (the candidates' first choice); anchored points are the second."""
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
     ids = np.asarray(ids, np.int64)
-    corners = refine_features(image, depth, p, intrinsics, dataclasses.replace(params, anchor_window_px=0),
-                              depth_sigma)
+    corners = refine_features(image, depth, p, intrinsics, dataclasses.replace(params, anchor_window_px=0))
     z_track = local_depth(depth, p, params, intrinsics)
     saddle = np.isin(ids, tracks.saddles)
     new = ~saddle & ~np.isin(ids, tracks.anchors.ids)
     saddle |= new & corners.symmetric
     plain = ~saddle & (~new | np.isfinite(z_track))
-    gray = to_gray(np.asarray(image)).astype(np.float32)
-    if BLUR_SIGMA_PX > 0:
-        gray = cv2.GaussianBlur(gray, (0, 0), BLUR_SIGMA_PX)
+    gray = to_gray(np.asarray(image))
     with np.errstate(invalid="ignore"):
         z_safe = np.where(np.isfinite(z_track), z_track, 1.0)
         max_sd = np.where(np.isfinite(z_track), depth_sigma(z_safe) * intrinsics.fx / z_safe, 0.0)

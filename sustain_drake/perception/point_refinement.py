@@ -66,10 +66,6 @@ class RefinementParams:
     symmetry_window_px: int = 0
     # least correlation of the window with itself turned 180 deg (1: symmetric, -1: a straight edge)
     min_symmetry: float = 0.5
-    # a point that moves on its face, when the face tilts by 45 deg (view_shift, times the depth over
-    # the focal length), farther than this many depth-noise sigmas at its depth is not fixed on the
-    # hand, unless centrally symmetric (the symmetry test alone then lets no other point in); 0: off
-    max_view_shift_sigmas: float = 0.0
     # px: half side of the template each track's point is anchored to (perception.anchored_points:
     # the point is where the track's first patch aligns each frame, not a corner); 0: off
     anchor_window_px: int = 0
@@ -80,8 +76,6 @@ class RefinementParams:
         if (self.corner_window_px < 0 or self.depth_window_px < 0 or self.blob_window_px < 0
                 or self.symmetry_window_px < 0 or self.anchor_window_px < 0):
             raise ValueError(f"window sizes must be >= 0 ({self})")
-        if not self.max_view_shift_sigmas >= 0:
-            raise ValueError(f"max_view_shift_sigmas must be >= 0 ({self})")
         if not 0 < self.max_incidence_deg <= 90:
             raise ValueError(f"max_incidence_deg must be in (0, 90] ({self})")
         if not (self.max_shift_px > 0 and self.surface_tolerance > 0 and 0 < self.min_fraction <= 1):
@@ -112,33 +106,9 @@ def refine_pixels(gray: np.ndarray, p_px: np.ndarray, params: RefinementParams):
         refined = np.where(is_blob[:, None], centres, refined)
     ok &= np.isfinite(refined).all(axis=1)
     ok &= np.linalg.norm(refined - p, axis=1) <= params.max_shift_px
-    if params.symmetry_window_px > 0 and params.max_view_shift_sigmas == 0 and ok.any():
+    if params.symmetry_window_px > 0 and ok.any():
         ok[ok] = central_symmetry(gray, refined[ok], params.symmetry_window_px) >= params.min_symmetry
     return refined, ok
-
-
-def fixed_on_surface(gray: np.ndarray, p_px: np.ndarray, z: np.ndarray, focal_px: float,
-                     params: RefinementParams, depth_sigma) -> tuple[np.ndarray, np.ndarray]:
-    """Which refined points (K x 2 px, at depths ``z`` m) stay on the same surface point as the view
-    changes: ``(fixed, symmetric)`` (K, K). ``symmetric``: the centrally symmetric ones
-    (``symmetry_window_px``, ``min_symmetry``); ``fixed``: those, and those that a 45 deg tilt of
-    their face moves on it by at most ``max_view_shift_sigmas`` times the depth noise
-    ``depth_sigma(z)`` (m, the sensor model) at their depth (``view_shift``, px, times ``z`` over the
-    focal length: a pixel spans ``z / f`` metres of a face seen head-on). A bias within the noise of
-    each sample is one the identification cannot tell from that noise; a tighter gate keeps too few
-    points on a tool without a checker."""
-    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
-    symmetric = np.zeros(p.shape[0], bool)
-    if p.shape[0] == 0:
-        return symmetric, symmetric.copy()
-    if params.symmetry_window_px > 0:
-        symmetric = central_symmetry(gray, p, params.symmetry_window_px) >= params.min_symmetry
-    fixed = symmetric.copy()
-    rest = np.flatnonzero(~fixed)
-    if rest.size:
-        shift = view_shift(gray, p[rest], params.corner_window_px) * np.asarray(z, float)[rest] / focal_px
-        fixed[rest] = shift <= params.max_view_shift_sigmas * depth_sigma(np.asarray(z, float)[rest])
-    return fixed, symmetric
 
 
 def central_symmetry(gray: np.ndarray, p_px: np.ndarray, half: int) -> np.ndarray:
@@ -161,60 +131,6 @@ def central_symmetry(gray: np.ndarray, p_px: np.ndarray, half: int) -> np.ndarra
     turned = np.einsum("kij,kij->k", windows, windows[:, ::-1, ::-1])
     textured = energy > 1e-6 * side * side
     out[inside[textured]] = turned[textured] / energy[textured]
-    return out
-
-
-# The views a point must survive (view_shift): the window seen from 45 deg off its normal along four
-# directions, a face's foreshortening by cos(45 deg) (0.71) along each.
-_TILT = np.cos(np.radians(45.0))
-_VIEWS = tuple(np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-               @ np.diag([_TILT, 1.0]) @ np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
-               for a in np.radians([0.0, 45.0, 90.0, 135.0]))
-
-
-def view_shift(gray: np.ndarray, p_px: np.ndarray, half: int) -> np.ndarray:
-    """How far each refined point moves on the surface when the view changes (K,), px: the image
-    about each sub-pixel point (a corner of ``cornerSubPix`` with the half window ``half``) is
-    warped as a 45 deg tilt of the face along four directions would (``_VIEWS``: affine maps
-    about the point, a view being locally affine), ``cornerSubPix`` is run again on each warped
-    window from the point, and the result is mapped back: the largest distance from the point.
-
-    A point where lines of the surface meet (a checker saddle, a clean corner) maps to itself under
-    any affine map, so it stays on the same surface point whatever the view: its shift is the
-    corner's own sub-pixel repeatability. A compromise between unrelated edges (wood grain, print
-    near a corner), or a point sliding along an edge, is reweighted by the view and moves: that
-    is what makes a point not fixed on the hand, whatever the texture. ``inf`` for a window that
-    leaves the image."""
-    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
-    out = np.full(p.shape[0], np.inf)
-    h, w = np.shape(gray)
-    reach = 2 * half  # the warped window's half side: the corner window and its possible moves
-    inside = np.flatnonzero(np.isfinite(p).all(axis=1) & (p[:, 0] >= reach + 1) & (p[:, 0] <= w - 2 - reach)
-                            & (p[:, 1] >= reach + 1) & (p[:, 1] <= h - 2 - reach))
-    if inside.size == 0 or half < 1:
-        return out
-    side, k, m = 2 * reach + 1, inside.size, len(_VIEWS)
-    offsets = np.arange(-reach, reach + 1, dtype=np.float32)
-    du, dv = np.meshgrid(offsets, offsets)  # rows are v, columns u
-    back = np.stack([np.linalg.inv(A) for A in _VIEWS]).astype(np.float32)  # warped -> original
-    # Pixel (i, j) of view v's window about point k samples the original at p_k + A_v^-1 (j, i).
-    map_u = (p[inside, 0, None, None, None].astype(np.float32)
-             + back[None, :, 0, 0, None, None] * du + back[None, :, 0, 1, None, None] * dv)
-    map_v = (p[inside, 1, None, None, None].astype(np.float32)
-             + back[None, :, 1, 0, None, None] * du + back[None, :, 1, 1, None, None] * dv)
-    warped = cv2.remap(np.asarray(gray, np.float32), map_u.reshape(k * m * side, side),
-                       map_v.reshape(k * m * side, side), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    centres = np.stack([np.full(k * m, float(reach)), reach + side * np.arange(k * m, dtype=float)], axis=1)
-    # Each search starts half a pixel off the point, as a track's pixel is: cornerSubPix returns its
-    # start unchanged when its solution leaves the window (no corner there), which is then told
-    # apart from a point that maps to itself.
-    starts = (centres + 0.5).astype(np.float32).reshape(-1, 1, 2)
-    corners = starts.copy()
-    cv2.cornerSubPix(warped, corners, (half, half), (-1, -1), _CRITERIA)
-    reverted = (corners == starts).all(axis=2).reshape(k, m).any(axis=1)
-    moved = (corners.reshape(-1, 2) - centres).reshape(k, m, 2)  # in the warped windows
-    on_surface = np.einsum("vij,kvj->kvi", back.astype(float), moved)  # mapped back to the original
-    out[inside] = np.where(reverted, np.inf, np.linalg.norm(on_surface, axis=2).max(axis=1))
     return out
 
 
@@ -376,17 +292,16 @@ class RefinedPoints(NamedTuple):
     p_CP: np.ndarray  # K x 3, m; a zero row where not valid (never NaN)
     valid: np.ndarray  # K: a point was measured
     p_px: np.ndarray  # K x 2: the refined pixel where valid, else the tracked one
-    # K: valid and centrally symmetric (the symmetry test ran and passed); with the view-shift gate,
-    # a valid point that is not symmetric was kept because a tilt of its face does not move it
+    # K: valid and centrally symmetric (the symmetry test ran and passed); a valid point that is
+    # not was refined without the test, or anchored on its patch (perception.anchored_points)
     symmetric: np.ndarray
 
 
 def refine_features(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
-                    params: RefinementParams | None = None, depth_sigma=None) -> RefinedPoints:
+                    params: RefinementParams | None = None) -> RefinedPoints:
     """The sub-pixel corner near each tracked pixel ``p_px`` and the robust depth there,
-    back-projected with the pinhole model. A point without a corner nearby, without a clean depth,
-    or (with ``max_view_shift_sigmas``) not fixed on its surface (``fixed_on_surface``, with the
-    depth noise ``depth_sigma(z)`` in m, required then) is not valid."""
+    back-projected with the pinhole model. A point without a corner nearby (with the symmetry test:
+    without a centrally symmetric one) or without a clean depth is not valid."""
     params = RefinementParams() if params is None else params
     p = np.asarray(p_px, dtype=float).reshape(-1, 2)
     none = np.zeros(p.shape[0], bool)
@@ -396,22 +311,16 @@ def refine_features(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intr
     refined, ok = refine_pixels(gray, p, params)
     z = local_depth(depth, refined, params, intrinsics)
     ok &= np.isfinite(z) & (z > 0)
-    # refine_pixels keeps only symmetric points when the symmetry test runs without the gate
-    symmetric = ok.copy() if params.symmetry_window_px > 0 else none.copy()
-    if params.max_view_shift_sigmas > 0 and ok.any():
-        if depth_sigma is None:
-            raise ValueError("refine_points: max_view_shift_sigmas needs the depth noise depth_sigma(z)")
-        tested = ok.copy()
-        ok[tested], symmetric[tested] = fixed_on_surface(gray, refined[tested], z[tested], intrinsics.fx,
-                                                         params, depth_sigma)
     p_CP = np.zeros((p.shape[0], 3))
     p_CP[ok] = pinhole_points(refined[ok], z[ok], intrinsics)  # with the robust depth
-    return RefinedPoints(p_CP, ok, np.where(ok[:, None], refined, p), symmetric & ok)
+    # refine_pixels keeps only symmetric points when the symmetry test runs
+    symmetric = ok.copy() if params.symmetry_window_px > 0 else none.copy()
+    return RefinedPoints(p_CP, ok, np.where(ok[:, None], refined, p), symmetric)
 
 
 def refine_points(image: np.ndarray, depth: np.ndarray, p_px: np.ndarray, intrinsics: PinholeIntrinsics,
-                  params: RefinementParams | None = None, return_pixels: bool = False, depth_sigma=None):
+                  params: RefinementParams | None = None, return_pixels: bool = False):
     """``(p_CP, valid)`` (K x 3 in m, K) of ``refine_features`` (and the pixels, K x 2, third, if
     ``return_pixels``)."""
-    r = refine_features(image, depth, p_px, intrinsics, params, depth_sigma)
+    r = refine_features(image, depth, p_px, intrinsics, params)
     return (r.p_CP, r.valid, r.p_px) if return_pixels else (r.p_CP, r.valid)

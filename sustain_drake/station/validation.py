@@ -202,7 +202,7 @@ RANGES: dict[type, dict[str, Range]] = {
         "allowable_error_factor": _above(0, 1e9), "max_consecutive_violations": AT_LEAST_ONE,
         "pause_after_convergence": WAIT, "max_candidates": _from(1, 64),
         "identifying_motion_interval": WAIT, "identifying_motion_max_hold": WAIT,
-        "identifying_motion_reach": _from(0, 2 * math.pi, "rad"), "max_view_shift_sigmas": _from(0, 100),
+        "identifying_motion_reach": _from(0, 2 * math.pi, "rad"),
         "false_alarm_window": WAIT, "log_rate": _above(0, 1000, "Hz"),
     },
     KinestheticConfig: {"period": _from(1e-4, 1, "s"), "min_touch_force": _from(0, 1000, "N"),

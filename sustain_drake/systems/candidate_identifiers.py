@@ -58,7 +58,7 @@ class FeatureRefiner(LeafSystem):
     Otherwise each point is the sub-pixel corner near the tracked pixel
     (``perception.point_refinement``), the output a function of the inputs with no state.
     ``depth_noise`` is the depth camera's noise model (``DepthNoiseModel``, its default if None):
-    an anchor pins its point within it, and ``params.max_view_shift_sigmas`` is relative to it.
+    an anchor pins its point within it.
     """
 
     def __init__(self, camera_info: CameraInfo, params: RefinementParams | None = None,
@@ -107,8 +107,7 @@ class FeatureRefiner(LeafSystem):
         if color is None:
             output.set_value(_without_points(features))
             return
-        refined = refine_features(color, depth, features.p_px, self._intrinsics, self._params,
-                                  depth_sigma=self._depth_noise.sigma)
+        refined = refine_features(color, depth, features.p_px, self._intrinsics, self._params)
         output.set_value(dataclasses.replace(features, **refined._asdict()))
 
     def _update_anchors(self, context, state) -> None:
