@@ -61,7 +61,7 @@ class HandEyeConfig:
     identifying_motion_max_hold: float = 3.0
     # rad (max-norm) from the arm's posture that the postures asked for more motion keep to; 0: anywhere
     identifying_motion_reach: float = 0.1
-    refine_points: bool = True  # feed the candidates sub-pixel corners and robust depth (FeatureRefiner)
+    refine_points: bool = True  # feed the candidates fixed points and robust depth (FeatureRefiner)
     # the wrist wrench's payload identification (dynamic mode) watches the held tool: its change
     # detection is a slip, found while no tracked point shows it (needs a wrist force/torque sensor)
     slip_from_wrench: bool = True

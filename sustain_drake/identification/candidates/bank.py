@@ -29,7 +29,7 @@ class Candidate:
     verified_samples: int = 0  # its samples taken up to the last frame the adopted model was verified
     sampled_p_CP: np.ndarray | None = None  # the point of its last sample (``min_view_change``)
     frames: int = 1  # frames it was fed (a new view or a held one): the observation's counts
-    # its point was centrally symmetric when admitted; False: kept for its view shift alone (a
+    # its point was centrally symmetric when admitted; False: anchored on its patch (a
     # second choice, ``fitting.FIRST_CHOICE_POINTS``) or not known
     symmetric: bool = False
 

@@ -187,14 +187,15 @@ def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tu
 
 
 # count: centrally symmetric points (a leader and the witness that confirms its camera,
-# ``confirm_with_witness``) that, where there are as many, keep the points kept for their view
-# shift alone out of the candidates (``admission``) and out of the joint refinement: a symmetric
-# point stays on the same surface point under any view, the others move by up to the gate's bound
+# ``confirm_with_witness``) that, where there are as many, keep the points anchored on their patch
+# out of the candidates (``admission``) and out of the joint refinement: a symmetric corner is
+# found again to a few hundredths of a pixel under any view, an anchored point on fine print moves
+# by a tenth of a pixel or more with the view (docs/hand_eye.md, "The points")
 FIRST_CHOICE_POINTS = 2
 
 
 def first_choice(members: list, best: Candidate) -> list:
-    """The joint refinement's members without those kept for their view shift alone
+    """The joint refinement's members without those anchored on their patch
     (``Candidate.symmetric`` False) when, with the leader, ``FIRST_CHOICE_POINTS`` symmetric ones
     join: a few points that stay put under any view outweigh many that move a little."""
     symmetric = [c for c in members if c.symmetric]

@@ -52,7 +52,7 @@ class FrameInput:
     # previous camera that a slipped tool leaves in place
     reset_reason: int = NO_RESET
     # per tracked feature, whether its point is centrally symmetric (``TrackedFeatures.symmetric``):
-    # such points are preferred to those kept for their view shift alone (None, or a length other
+    # such points are preferred to those anchored on their patch (None, or a length other
     # than ids': not known, no point is)
     symmetric: np.ndarray | None = None
 
