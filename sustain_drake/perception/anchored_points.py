@@ -53,6 +53,10 @@ MAX_ITERATIONS = 12
 MIN_CORRELATION = 0.9
 # px: the radius about a template's centre whose pixels seed the fit of its face's plane
 FACE_SEED_PX = 3.0
+# Below this ZNCC (and still at least MIN_CORRELATION) the aligned patch becomes the anchor's
+# template (``_refreshed``): the appearance has changed enough to matter, while the alignment is
+# still sure of the point (a clean alignment is at 0.98-1).
+REFRESH_CORRELATION = 0.97
 # grey levels (of 255), 1 sd: the camera's pixel noise, the floor of an alignment's residual (a
 # rendered image has none but its quantisation, 0.3; a camera's is 1-3)
 PIXEL_NOISE = 1.0
@@ -191,27 +195,12 @@ def _face_masks(depths: np.ndarray, z: np.ndarray, half: int, tolerance: float) 
     return use.astype(np.float32)
 
 
-def make_anchors(gray: np.ndarray, depth: np.ndarray, ids: np.ndarray, p_px: np.ndarray,
-                 z: np.ndarray, half: int, surface_tolerance: float) -> Anchors:
-    """New anchors for tracks ``ids`` at their sub-pixel pixels ``p_px`` (K x 2) with centre depths
-    ``z`` (K, m; NaN: no anchor) in a float32 gray image and its depth image (m): templates of
-    ``(2 half + 1)^2`` pixels, masked to the pixels within ``surface_tolerance`` (m) of the centre's
-    depth. A track whose template leaves the image, has too few pixels on its centre's surface, or
-    no texture there gets a dead anchor (``alive`` False)."""
-    side = 2 * half + 1
-    k = len(ids)
-    if k == 0:
-        return Anchors()
-    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
-    warps = np.zeros((k, 2, 3))
-    warps[:, 0, 0] = warps[:, 1, 1] = 1.0
-    warps[:, :, 2] = p
-    h, w = gray.shape
-    inside = (np.isfinite(p).all(axis=1) & (p[:, 0] >= half + 1) & (p[:, 0] <= w - half - 2)
-              & (p[:, 1] >= half + 1) & (p[:, 1] <= h - half - 2) & np.isfinite(z))
-    patches = np.nan_to_num(_warp_patches(gray, warps, half))
-    depths = _warp_patches(np.asarray(depth, np.float32), np.rint(warps), half)
-    masks = _face_masks(depths, np.asarray(z, float), half, surface_tolerance)
+def _templates(patches: np.ndarray, masks: np.ndarray, half: int):
+    """What the alignment needs of K patches (K x S x S) and their face masks: ``(templates,
+    steepest, hessian_inv, contrast, usable)``: the patches normalised, the masked steepest-descent
+    images with the shading projected out, the inverse Gauss-Newton Hessian, the RMS contrast
+    (grey levels), and whether the patch has texture and determines its warp."""
+    k, side = patches.shape[0], 2 * half + 1
     # The gradients use central differences: a pixel counts only with both neighbours on the surface.
     inner = masks.copy()
     inner[:, :, 1:-1] *= masks[:, :, :-2] * masks[:, :, 2:]
@@ -226,18 +215,42 @@ def make_anchors(gray: np.ndarray, depth: np.ndarray, ids: np.ndarray, p_px: np.
     steepest = np.stack([gx * x, gy * x, gx * y, gy * y, gx, gy], axis=3)
     steepest = _shading_out(steepest, inner, half).reshape(k, side * side, 6)
     hessian = np.einsum("kni,knj->kij", steepest, steepest)
-    enough = masks.mean(axis=(1, 2)) >= MIN_MASK_FRACTION
-    textured = contrast > 1e-3
-    invertible = np.linalg.cond(hessian) < 1e8 if k else np.zeros(0, bool)
-    alive = inside & enough & textured & invertible
+    usable = (contrast > 1e-3) & (np.linalg.cond(hessian) < 1e8 if k else np.zeros(0, bool))
     hessian_inv = np.zeros_like(hessian)
-    if alive.any():
-        hessian_inv[alive] = np.linalg.inv(hessian[alive])
+    if usable.any():
+        hessian_inv[usable] = np.linalg.inv(hessian[usable])
+    return (templates.astype(np.float32), steepest.astype(np.float32), hessian_inv, contrast.astype(float),
+            usable)
+
+
+def make_anchors(gray: np.ndarray, depth: np.ndarray, ids: np.ndarray, p_px: np.ndarray,
+                 z: np.ndarray, half: int, surface_tolerance: float) -> Anchors:
+    """New anchors for tracks ``ids`` at their sub-pixel pixels ``p_px`` (K x 2) with centre depths
+    ``z`` (K, m; NaN: no anchor) in a float32 gray image and its depth image (m): templates of
+    ``(2 half + 1)^2`` pixels, masked to the pixels within ``surface_tolerance`` (m) of the centre's
+    depth. A track whose template leaves the image, has too few pixels on its centre's surface, or
+    no texture there gets a dead anchor (``alive`` False)."""
+    k = len(ids)
+    if k == 0:
+        return Anchors()
+    p = np.asarray(p_px, dtype=float).reshape(-1, 2)
+    warps = np.zeros((k, 2, 3))
+    warps[:, 0, 0] = warps[:, 1, 1] = 1.0
+    warps[:, :, 2] = p
+    h, w = gray.shape
+    inside = (np.isfinite(p).all(axis=1) & (p[:, 0] >= half + 1) & (p[:, 0] <= w - half - 2)
+              & (p[:, 1] >= half + 1) & (p[:, 1] <= h - half - 2) & np.isfinite(z))
+    patches = np.nan_to_num(_warp_patches(gray, warps, half))
+    depths = _warp_patches(np.asarray(depth, np.float32), np.rint(warps), half)
+    masks = _face_masks(depths, np.asarray(z, float), half, surface_tolerance)
+    templates, steepest, hessian_inv, contrast, usable = _templates(patches, masks, half)
+    enough = masks.mean(axis=(1, 2)) >= MIN_MASK_FRACTION
+    alive = inside & enough & usable
     points = np.zeros((k, 2))
     if alive.any():
         points[alive] = best_point(hessian_inv[alive], 0.5 * half)
-    return Anchors(np.asarray(ids, np.int64), templates.astype(np.float32), masks, hessian_inv,
-                   steepest.astype(np.float32), warps, p.copy(), alive, contrast.astype(float), points)
+    return Anchors(np.asarray(ids, np.int64), templates, masks, hessian_inv, steepest, warps, p.copy(),
+                   alive, contrast, points)
 
 
 def _point_jacobian(c: np.ndarray) -> np.ndarray:
@@ -346,7 +359,8 @@ def anchor_step(anchors: Anchors, gray: np.ndarray, depth: np.ndarray, ids: np.n
         new_warps[live] = np.where(ok[:, None, None], warps, old.warps[live])
         track_px = old.track_px.copy()
         track_px[live] = p[rows[live]]
-        old = dataclasses.replace(old, warps=new_warps, track_px=track_px, alive=alive)
+        old = _refreshed(dataclasses.replace(old, warps=new_warps, track_px=track_px, alive=alive),
+                         live[ok & (corr < REFRESH_CORRELATION)], g, half)
         target = rows[live]
         at_point = np.einsum("kij,kj->ki", warps[:, :, :2], current.points) + warps[:, :, 2]
         out_px[target] = np.where(ok[:, None], at_point, p[target])
@@ -360,6 +374,25 @@ def anchor_step(anchors: Anchors, gray: np.ndarray, depth: np.ndarray, ids: np.n
     merged = _concat(old, fresh)
     order = np.argsort(merged.ids, kind="stable")
     return merged.take(order), AnchoredPixels(out_px, pinned, sd, correlation)
+
+
+def _refreshed(anchors: Anchors, rows: np.ndarray, gray: np.ndarray, half: int) -> Anchors:
+    """The anchors with the templates of ``rows`` replaced by the patches their warps align now, in
+    the same template coordinates (the same mask, the same point): the template update of Matthews,
+    Ishikawa and Baker ("The template update problem", 2004). A face that keeps turning changes its
+    appearance beyond what an affine warp of its first patch explains; the patch aligned to the
+    first is the same surface, so the point keeps its place on it up to that one alignment's error
+    (a few hundredths of a pixel), not a track's frame-by-frame drift."""
+    if rows.size == 0:
+        return anchors
+    patches = np.nan_to_num(_warp_patches(gray, anchors.warps[rows], half))
+    templates, steepest, hessian_inv, contrast, usable = _templates(patches, anchors.masks[rows], half)
+    rows, keep = rows[usable], np.flatnonzero(usable)
+    new = {"templates": templates, "steepest": steepest, "hessian_inv": hessian_inv, "contrast": contrast}
+    out = {name: getattr(anchors, name).copy() for name in new}
+    for name, value in new.items():
+        out[name][rows] = value[keep]
+    return dataclasses.replace(anchors, **out)
 
 
 def _concat(a: Anchors, b: Anchors) -> Anchors:

@@ -9,10 +9,13 @@ recoveries after a slip and after a camera move may choose one."""
 
 from dataclasses import replace
 
+import numpy as np
+
 from sustain_drake.identification.candidates import camera_move_recovery, slip_recovery
 from sustain_drake.identification.candidates.admission import solve
 from sustain_drake.identification.candidates.bank import Adoption, Candidate, CandidateBank
 from sustain_drake.identification.candidates.fitting import (
+    FIRST_CHOICE_POINTS,
     best_p_HP_given_camera,
     joint_refined,
     mean_squared_error_of,
@@ -78,8 +81,14 @@ def choose(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCr
     # Once a leader was held back (min_rotation_lever, min_adopt_rotation_spread), more motion is wanted
     # until one leads or no converged candidate is left (then the detector's trials must find new body
     # features).
+    # An anchored point (the second choice) asks for it only where the frame shows fewer than two
+    # symmetric points at all: on a tool with a checker its samples come before the detector's
+    # confirming trials have flagged the corners, and the identifying motion's postures would cut
+    # those trials short.
+    few_corners = int(np.count_nonzero(seen.symmetric)) < FIRST_CHOICE_POINTS
     first_point = params.motion_min_samples > 0 and not pool.adoptions and any(
-        c.solution.num_samples >= params.motion_min_samples for c in pool.kept)
+        (c.symmetric or few_corners) and c.solution.num_samples >= params.motion_min_samples
+        for c in pool.kept)
     more_motion = pool.leader < 0 and (held_back or first_point or (bank.more_motion and any(
         c.solution.verdict.converged for c in pool.kept)))
     held_id = (best.feature_id if held_back
