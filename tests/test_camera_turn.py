@@ -221,7 +221,7 @@ POINTS = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, 
 
 
 def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399 * DT, 404 * DT),
-                  resets=(400,), ended=None, body_after=True, static_after=None):  # fmt: skip
+                  resets=(400,), ended=None, body_after=True, static_after=None, corners=True):  # fmt: skip
     """Three tool points observed under the true model; at frame 400 the head turns (``TURN`` about
     ``PIVOT_C``: 10 deg, 8 mm) and the state machine resets for the camera's move, the model
     cleared. Every track ends at the turn: the same points come back as new tracks (ids + 100), or
@@ -230,8 +230,9 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
     None: no turn); the state machine's reset counts up at each frame of ``resets``; ``ended``: more
     points of the hand, tracked only over frames 100-300 before the move; ``body_after``: whether
     the tracks after the move are flagged body; ``static_after``: ``{id: p_W}``, points of the
-    static scene tracked after the move (never body). Returns the bank and the frame of the first
-    adoption after the move (None)."""
+    static scene tracked after the move (never body); ``corners``: whether the hand's points are
+    centrally symmetric corners (the refiner's first choice; else anchored points). Returns the bank
+    and the frame of the first adoption after the move (None)."""
     X1 = turned(TRUTH.X_WC, TURN)
     bank, rng = CandidateBank(), np.random.default_rng(3)
     turn = None if turn_of is None else turn_of(TRUTH.X_WC, X1)
@@ -244,11 +245,13 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
         X_WC = X1 if after else TRUTH.X_WC
         p = [seen(X, points[i], rng, X_WC=X_WC) for i in points]
         body = [body_after or not after] * len(p)
+        symmetric = [corners] * len(p)
         ids = list(points)
         if after and static_after:
             ids += list(static_after)
             p += [(q - X1[:3, 3]) @ X1[:3, :3] + rng.normal(0, 1e-4, 3) for q in static_after.values()]
             body += [False] * len(static_after)
+            symmetric += [corners] * len(static_after)  # corners of the scene's own print
         adopted = (None if after or bank.leader < 0
                    else pack_x(X_WC[:3, :3], X_WC[:3, 3], points[bank.leader]))
         given = turn if k >= 405 else None
@@ -257,7 +260,7 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
         reset = float(sum(k >= r for r in resets))
         frame = candidates.FrameInput(k * DT, reset, X, k * DT, np.array(ids), np.array(p),
                                       np.ones(len(p), bool), np.array(body), adopted, allowable_error=1e-4,
-                                      scene_turn=given, reset_reason=CAMERA_MOVED)
+                                      scene_turn=given, reset_reason=CAMERA_MOVED, symmetric=np.array(symmetric))
         bank = candidates.step(bank, params, CRITERIA, frame)
         if after and bank.leader >= 0:
             return bank, k
@@ -376,3 +379,18 @@ def test_after_a_head_turn_tracks_where_the_turned_camera_sees_known_points_are_
     # Without the scene's turn there is nothing to predict from.
     bank, k_none = run_head_turn(admit, None, body_after=False, frames=520)
     assert k_none is None and not bank.candidates
+
+
+def test_after_a_head_turn_new_tracks_are_matched_to_known_points_by_place_only_if_both_are_corners():
+    """A new track near where the turned camera sees a known point is that point only when both are
+    centrally symmetric corners (a mark of the pattern, found again by any track); an anchored point
+    is wherever its track began, so a new anchored track is never taken for a known one by its
+    place: no camera from the turn's matching, and so no camera a few millimetres off."""
+    params = replace(HANDOVER, max_observers=3, keep_tool_points=True, min_rotation_spread=0.05,
+                     turn_admit_known=True)
+    turn = lambda X0, X1: scene_turn(X0, X1, static_scene(X0))  # noqa: E731
+    bank, k = run_head_turn(params, turn, frames=460)
+    assert k is not None and bank.adoptions[-1].kind == "scene turn, tool points kept"
+    bank, k = run_head_turn(params, turn, frames=460, corners=False)
+    assert k is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
+    assert not bank.known_corners and len(bank.known_points) >= 3

@@ -1067,3 +1067,26 @@ def test_a_symmetric_candidate_leads_before_second_choice_points_that_converged_
     assert [a.feature_id for a in bank.adoptions] == [1]
     bank, _ = run(lambda k, X, rng: frames(k, X, rng, flags=False))
     assert [a.feature_id for a in bank.adoptions] in ([10], [11])
+
+
+def test_an_anchored_point_asks_for_more_motion_only_where_the_frame_shows_few_symmetric_points():
+    """``motion_min_samples`` with the refiner's kinds: an anchored point (second choice) does not ask
+    for the identifying motion while the frame shows two symmetric points, even off the body (a
+    checker the detector's trials have not flagged yet: those trials come first); alone, it asks."""
+    params = replace(PARAMS, motion_min_samples=30)
+    corners = [P_TOOL + [0.0, 0.01 * i, 0.02] for i in (1, 2)]
+
+    def frames(k, X, rng, with_corners):
+        if k >= 40:
+            return None
+        ids, points = [4], [seen(X, P_TOOL, rng)]
+        body, symmetric = [True], [False]
+        if with_corners:  # seen, symmetric, not yet flagged as body
+            ids, points = ids + [7, 8], points + [seen(X, p, rng) for p in corners]
+            body, symmetric = body + [False, False], symmetric + [True, True]
+        return ids, points, [True] * len(ids), body, symmetric
+
+    bank, _ = run(lambda k, X, rng: frames(k, X, rng, True), params=params)
+    assert bank.find(4).solution.num_samples >= 30 and not bank.more_motion
+    bank, _ = run(lambda k, X, rng: frames(k, X, rng, False), params=params)
+    assert bank.more_motion

@@ -108,7 +108,7 @@ def _admit_new(bank, params, criteria, seen: SeenFrame, kept: list, rejected: fr
     # Confirmed body features first, then features in body cells; oldest track first. While
     # observing (with observers), alternately the nearest to where the adopted model puts the
     # tool point (the tool's points) and the oldest (long tracks: often the hand's own).
-    near_known = (near_known_points(bank, params, X_frame, p_CP, usable)
+    near_known = (near_known_points(bank, params, X_frame, p_CP, usable & seen.symmetric)
                   if params.turn_admit_known and bank.leader < 0 else np.zeros_like(on_body))
     order = np.lexsort((ids, ~on_body, ~seen.symmetric, ~near_known,
                         ~np.isin(ids, [i for i, _ in bank.known_points])))

@@ -101,6 +101,10 @@ class CandidateBank:
     tool_observed: bool = False  # a tool point gave this frame's observation sample
     model_x: np.ndarray | None = None  # the adopted estimate while there is a leader (Eq. (36))
     known_points: tuple = ()  # after a camera move: (feature_id, p_HP) the abandoned model observed
+    # the ids of those that are centrally symmetric corners: a new track is matched to a known point
+    # by where it lies only if both are (a corner is the same mark of the pattern whichever track
+    # finds it; an anchored point is wherever its track began)
+    known_corners: frozenset = frozenset()
     moved_from_x: np.ndarray | None = None  # the model a camera move cleared (keep_tool_points)
     moved_at: float = math.nan  # s, when that reset came
     turn: object | None = None  # the static scene's turn across that move (``FrameInput.scene_turn``)

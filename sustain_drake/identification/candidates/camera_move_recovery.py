@@ -150,18 +150,20 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
     R_WC0, p_WC0 = x0[0:9].reshape(3, 3, order="F"), x0[9:12]
     shifted = bank.turned_p_WC is not None
     p_turned, window = _turn_window(bank, params)
-    known_p = np.array(list(known.values()))
     ready = [c for c in kept if c.solution.num_samples >= params.turn_min_samples]
     pairs = [(c, known[c.feature_id]) for c in ready if c.feature_id in known]
-    # A new track (the turn ended the old one) is a known point seen from the turned camera at
-    # the old position: off by the camera's unknown shift, the same for every track (over the same
-    # time), so the shift is the offset most new tracks agree on.
-    new = [c for c in ready if c.feature_id not in known
+    # A new track (the turn ended the old one) on a known corner is that corner seen from the
+    # turned camera at the old position: off by the camera's unknown shift, the same for every
+    # track (over the same time), so the shift is the offset most new tracks agree on. Only corners
+    # are matched so: an anchored point is wherever its track began, a new one a few millimetres
+    # from a known one is another point.
+    known_p = np.array([p for i, p in bank.known_points if i in bank.known_corners]).reshape(-1, 3)
+    new = [c for c in ready if c.feature_id not in known and c.symmetric
            and rotation_spread(c.statistic) >= params.min_rotation_spread]  # else a point of any link fits
     guesses = np.array([best_p_HP_given_camera(c.statistic, R_turned, p_turned) for c in new]).reshape(-1, 3)
     tracked = [best_p_HP_given_camera(c.statistic, R_turned, p_turned) - p for c, p in pairs]
     offset = _common_offset(guesses, known_p, tracked, params, window, 1 if shifted else 2)
-    if offset is not None:
+    if offset is not None and len(known_p):
         for c, guess in zip(new, guesses, strict=True):
             distance = np.linalg.norm(known_p - (guess - offset), axis=1)
             j = int(np.argmin(distance))
@@ -180,7 +182,7 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
         # known neighbours and the camera follows it (17.7 mm in the tests); points off the line
         # leave no such offset.
         return None
-    return _leading(fit[1], fit[2], fit[0], known_p[0])
+    return _leading(fit[1], fit[2], fit[0], next(iter(known.values())))
 
 
 def _turn_window(bank: CandidateBank, params: CandidateParams) -> tuple[np.ndarray, float]:
@@ -194,19 +196,20 @@ def _turn_window(bank: CandidateBank, params: CandidateParams) -> tuple[np.ndarr
 
 def near_known_points(bank: CandidateBank, params: CandidateParams, X_WH: np.ndarray, p_CP: np.ndarray,
                        usable: np.ndarray) -> np.ndarray:
-    """``turn_admit_known``: per tracked feature, whether its point lies within the turned camera's
-    window plus ``turn_radius`` of where that camera, posed as ``_turn_window`` says, sees a known
-    point of the hand at ``X_WH`` (all False before a turn). The detector's body cells are fixed in
-    the image, so after a camera move they hold the static scene and its trials must find the
-    body's features again, which can take seconds while the tracks already lie a few mm from where
+    """``turn_admit_known``: per tracked feature (``usable``: the symmetric ones), whether its point
+    lies within the turned camera's window plus ``turn_radius`` of where that camera, posed as
+    ``_turn_window`` says, sees a known corner of the hand at ``X_WH`` (all False before a turn).
+    The detector's body cells are fixed in the image, so after a camera move they hold the static
+    scene and its trials must find the body's features again, which can take seconds while the tracks already lie a few mm from where
     the known marks are predicted (docs/hand_eye_record.md); the model says where they are. A
     point of the static scene admitted so is left out by the camera's fit: with the hand turning,
     its samples fit no point of H."""
     near = np.zeros(len(usable), bool)
-    if bank.turned_R_WC is None or not bank.known_points or not np.any(usable):
+    corners = [p for i, p in bank.known_points if i in bank.known_corners]
+    if bank.turned_R_WC is None or not corners or not np.any(usable):
         return near
     p_WC, window = _turn_window(bank, params)
-    p_CQ = points_in_camera(bank.turned_R_WC, p_WC, np.array([p for _, p in bank.known_points]), X_WH)
+    p_CQ = points_in_camera(bank.turned_R_WC, p_WC, np.array(corners), X_WH)
     distance = np.linalg.norm(p_CP[usable][:, None, :] - p_CQ[None, :, :], axis=2).min(axis=1)
     near[usable] = distance <= window + params.turn_radius
     return near

@@ -69,16 +69,20 @@ def _after_reset(bank: CandidateBank, params: CandidateParams, frame: FrameInput
     camera_moved = frame.reset_reason == CAMERA_MOVED
     previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) and not camera_moved else None
     known = () if previous is not None else bank.known_points
+    corners = frozenset() if previous is not None else bank.known_corners
     # The camera before a move whose turn has not come yet: the resets that follow while the
     # camera still moves (no leader in between) keep it; one after the turn is a new change.
     moved_from, moved_at = (bank.moved_from_x, bank.moved_at) if bank.turn is None else (None, math.nan)
     if camera_moved and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
         known = model_points(bank, params)  # the model cleared: the camera moved, the tool did not
+        corners = frozenset(c.feature_id for c in bank.candidates + bank.archive if c.symmetric)
+        corners = frozenset(i for i, _ in known if i in corners)
         moved_from, moved_at = bank.model_x, float(time)
     elif previous is not None or bank.leader >= 0:
         moved_from, moved_at = None, math.nan
     return replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
-                   known_points=known, model_x=None, moved_from_x=moved_from, moved_at=moved_at,
+                   known_points=known, known_corners=corners, model_x=None, moved_from_x=moved_from,
+                   moved_at=moved_at,
                    turn=None, turned_R_WC=None, turned_p_WC=None, reset_time=float(time),
                    last_reset=float(frame.reset), round_start=math.nan,
                    observed_last=None, observed_p_HP=None,
