@@ -260,7 +260,8 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
         reset = float(sum(k >= r for r in resets))
         frame = candidates.FrameInput(k * DT, reset, X, k * DT, np.array(ids), np.array(p),
                                       np.ones(len(p), bool), np.array(body), adopted, allowable_error=1e-4,
-                                      scene_turn=given, reset_reason=CAMERA_MOVED, symmetric=np.array(symmetric))
+                                      scene_turn=given, reset_reason=CAMERA_MOVED,
+                                      symmetric=np.array(symmetric))
         bank = candidates.step(bank, params, CRITERIA, frame)
         if after and bank.leader >= 0:
             return bank, k

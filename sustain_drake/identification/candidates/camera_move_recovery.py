@@ -200,10 +200,10 @@ def near_known_points(bank: CandidateBank, params: CandidateParams, X_WH: np.nda
     lies within the turned camera's window plus ``turn_radius`` of where that camera, posed as
     ``_turn_window`` says, sees a known corner of the hand at ``X_WH`` (all False before a turn).
     The detector's body cells are fixed in the image, so after a camera move they hold the static
-    scene and its trials must find the body's features again, which can take seconds while the tracks already lie a few mm from where
-    the known marks are predicted (docs/hand_eye_record.md); the model says where they are. A
-    point of the static scene admitted so is left out by the camera's fit: with the hand turning,
-    its samples fit no point of H."""
+    scene and its trials must find the body's features again, which can take seconds while the
+    tracks already lie a few mm from where the known marks are predicted (docs/hand_eye_record.md);
+    the model says where they are. A point of the static scene admitted so is left out by the
+    camera's fit: with the hand turning, its samples fit no point of H."""
     near = np.zeros(len(usable), bool)
     corners = [p for i, p in bank.known_points if i in bank.known_corners]
     if bank.turned_R_WC is None or not corners or not np.any(usable):
