@@ -2,7 +2,7 @@
 a part of the run, and prints each run's adoptions (issue 27; never the held-out set).
 
     .venv/bin/python bench/bench_scene_variant.py --cells 9 15 17 --duration 45 \\
-        --set hand_eye.max_view_shift_sigmas=1.0
+        --set hand_eye.min_samples=200
 
 Each ``--set KEY=VALUE`` is a dotted scenario key and a YAML value, as a sweep's axes are. The runs
 go to ``--out``/cell<N> (log.npz, metrics.json); ``--duration`` 45 s stops before the matrix's first
