@@ -75,8 +75,8 @@ def _after_reset(bank: CandidateBank, params: CandidateParams, frame: FrameInput
     moved_from, moved_at = (bank.moved_from_x, bank.moved_at) if bank.turn is None else (None, math.nan)
     if camera_moved and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
         known = model_points(bank, params)  # the model cleared: the camera moved, the tool did not
-        corners = frozenset(c.feature_id for c in bank.candidates + bank.archive if c.symmetric)
-        corners = frozenset(i for i, _ in known if i in corners)
+        symmetric = {c.feature_id for c in (*bank.candidates, *bank.archive) if c.symmetric}
+        corners = frozenset(i for i, _ in known if i in symmetric)
         moved_from, moved_at = bank.model_x, float(time)
     elif previous is not None or bank.leader >= 0:
         moved_from, moved_at = None, math.nan
