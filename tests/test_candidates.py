@@ -360,6 +360,84 @@ def test_after_a_slip_the_previous_camera_is_kept_and_only_p_HP_is_new():
     assert np.linalg.norm(last.estimate.p_WC - moved.X_WC[:3, 3]) < 5e-3
 
 
+def _turned_camera_and_motion(angle=0.03):
+    """A camera turned by ``angle`` about an axis across its view (through its centre), and a hand
+    motion from frame 200 that turns mostly about the direction in which that turn shifts the
+    tool point: under the old camera the point's own ``p_HP`` absorbs most of the shift."""
+    R_WC, p_WC = TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3]
+    turn = Rotation.from_rotvec(angle * R_WC @ np.array([0.6, 0.8, 0.0])).as_matrix()
+    moved = TRUTH.X_WC.copy()
+    moved[:3, :3] = turn @ R_WC
+    X0 = hand_pose(200)
+    p_W0 = X0[:3, :3] @ P_TOOL + X0[:3, 3]
+    v = (p_W0 - p_WC) / np.linalg.norm(p_W0 - p_WC)
+    u = (turn.T - np.eye(3)) @ (p_W0 - p_WC)
+    u /= np.linalg.norm(u)
+    w = np.cross(u, v)
+
+    def pose(k):
+        t = (k - 200) * DT
+        X = X0.copy()
+        turned = 0.4 * math.sin(0.9 * t) * u + 0.05 * (math.sin(1.3 * t) * v + math.sin(0.7 * t) * w)
+        X[:3, :3] = Rotation.from_rotvec(turned).as_matrix() @ X0[:3, :3]
+        X[:3, 3] = X0[:3, 3] + 0.03 * (math.sin(0.5 * t) * u + math.sin(0.8 * t) * v + math.sin(1.1 * t) * w)
+        return X
+
+    return moved, pose
+
+
+def test_a_camera_move_taken_for_a_slip_keeps_the_previous_camera_only_if_the_views_confirm_it():
+    """A camera move the scene did not show (not judged still) resets the model like a slip. A
+    point's own p_HP absorbs the 32 mm shift of a 0.03 rad turn where the hand turns about the
+    shift's direction, so its fit alone keeps the old camera, 1.7 deg off; with the accuracy asked
+    for, the points since the reset must pin a camera of their own there first."""
+    x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+    params = CandidateParams(observe_min_samples=100, keep_camera_min_samples=30, confirm_with_witness=False,
+                             min_rotation_spread=0.05)
+
+    def before(k, X, rng):
+        return None if k >= 200 else ([9], [seen(X, P_TOOL, rng)], [True], [True])
+
+    bank, k = run(before, reference=x_true, params=params)
+    moved, pose = _turned_camera_and_motion()
+
+    def after(k, X, rng):
+        return None if k >= 800 else ([9], [seen(X, P_TOOL, rng, X_WC=moved)], [True], [True])
+
+    fooled, _ = run(after, bank, reset=1.0, reference=x_true, start=k, params=params, pose=pose)
+    assert fooled.adoptions[-1].kind == "previous camera"
+    assert rotation_error_deg(fooled.adoptions[-1].estimate.R_WC, moved[:3, :3]) > 1.5
+    accurate = replace(params, camera_accuracy=0.002, camera_rotation_accuracy=math.radians(0.2))
+    bank, _ = run(after, bank, reset=1.0, reference=x_true, start=k, params=accurate, pose=pose)
+    assert [a.kind for a in bank.adoptions[1:]] == ["identified"]  # the camera found again
+    estimate = bank.adoptions[-1].estimate
+    assert np.linalg.norm(estimate.p_WC - moved[:3, 3]) < 2e-3
+    assert rotation_error_deg(estimate.R_WC, moved[:3, :3]) < 0.2
+
+
+def test_the_views_since_a_reset_confirm_the_previous_camera_only_where_it_is():
+    """``slip_recovery.views_confirm``: rich motion of two points pins a camera within the accuracy;
+    the previous camera is confirmed where it is, not where the camera turned 0.5 deg."""
+    params = CandidateParams(confirm_with_witness=False, camera_accuracy=0.002,
+                             camera_rotation_accuracy=math.radians(0.2))
+    points = {9: P_TOOL, 11: P_TOOL + [0.05, 0.0, -0.03]}
+    moved, _ = _turned_camera_and_motion(math.radians(0.5))
+    for X_WC, confirmed in ((TRUTH.X_WC, True), (moved, False)):
+        def frames(k, X, rng, X_WC=X_WC):
+            if k >= 300:
+                return None
+            return list(points), [seen(X, p, rng, X_WC=X_WC) for p in points.values()], [True] * 2, [True] * 2
+
+        bank, _ = run(frames, params=replace(params, max_candidates=2, max_unconverged_time=100.0),
+                      scene_still_since=0.0)
+        kept = [bank.find(i) for i in points]
+        previous = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
+        p_HP = candidates.fitting.best_p_HP_given_camera(kept[0].statistic, TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3])
+        best = candidates.bank.with_camera(kept[0], previous, p_HP, 3 * (0.5e-3) ** 2)
+        pool = candidates.frame.Pool(kept, [], frozenset(), True, 0.0, -1, (), math.inf)
+        assert candidates.slip_recovery.views_confirm(best, pool, params) is confirmed
+
+
 def test_a_camera_is_adopted_only_when_a_second_point_agrees():
     params = CandidateParams(observe_min_samples=50)  # confirm_with_witness by default
     p4 = P_TOOL + [0.03, -0.02, 0.04]
