@@ -1,6 +1,6 @@
 """A camera move re-found from what it left as it was (beyond the paper): the static scene's
 correspondences across the move (``perception.camera_motion``), the camera from them and the held
-tool's points (``eye_to_hand_points.camera_after_turn``), and the candidates adopting that camera after a
+tool's points (``camera_turn.camera_after_turn``), and the candidates adopting that camera after a
 camera move (``identification.candidates``, ``keep_tool_points``)."""
 
 from dataclasses import replace
@@ -15,7 +15,7 @@ from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank
 from sustain_drake.identification.coordination import CAMERA_MOVED
 from sustain_drake.identification.eye_to_hand import build_A, pack_x
-from sustain_drake.identification.eye_to_hand_points import TurnAnchors, camera_after_turn
+from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
 from sustain_drake.identification.rotation import nearest_rotation
 from sustain_drake.perception import camera_motion
 from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState, SceneTurn
@@ -210,7 +210,7 @@ def noisy_turn(n, pixel_noise, seed, centre_px=None):
 
 
 def test_a_turn_is_used_when_its_own_uncertainty_allows_and_that_uncertainty_bounds_its_error():
-    """The turn's 1 sd (``turn_rotation_sd``, from the anchors' misfits and spread) bounds its
+    """The turn's 1 sd (``_turn_rotation_sd``, from the anchors' misfits and spread) bounds its
     error (within 3 sd on all 30 noisy turns of 6-40 anchors, at worst 2.45 sd; two misses are
     allowed), and decides whether it is used:
     eight anchors spread over the image at 0.3 px give a turn (the soak's 8-anchor move), eight

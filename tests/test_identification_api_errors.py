@@ -27,6 +27,7 @@ from sustain_drake.identification import (
     PayloadIdentifier,
     SustainableIdentifier,
     batch,
+    camera_turn,
     coordination,
     eye_to_hand,
     observability,
@@ -118,8 +119,8 @@ TARGETS = {
     "eye_to_hand_points.points_given_camera": (points.points_given_camera, ([S16], R, P)),
     "eye_to_hand_points.refine_joint_weighted": (points.refine_joint_weighted, ([S16, S16], R, P, 10, 1e-3)),
     "eye_to_hand_points.joint_covariance": (points.joint_covariance, ([S16, S16], R, P, [P2, P2], None)),
-    "eye_to_hand_points.camera_after_turn": (points.camera_after_turn,
-                                             (R, P, points.TurnAnchors(B0, Q0, B1), [], [], 5, 2, 1e-3)),
+    "camera_turn.camera_after_turn": (camera_turn.camera_after_turn,
+                                      (R, P, camera_turn.TurnAnchors(B0, Q0, B1), [], [], 5, 2, 1e-3)),
     "PayloadIdentifier": (PayloadIdentifier, (G, 1.0, None)),
     "PayloadIdentifier.add": (lambda *a: PayloadIdentifier().add(*a), (WRENCH, R)),
     "PayloadIdentifier.sample_error": (lambda *a: PayloadIdentifier().sample_error(*a),
@@ -160,7 +161,7 @@ TARGETS = {
 
 # Result records, not checked (built by the API itself), and the checks themselves.
 NOT_TARGETS = {"EigenSolution", "Verdict", "SolutionProperties", "FormulationIdentifier", "EyeToHandEstimate",
-               "EyeToHandSolution", "PayloadSolution", "CameraAfterTurn", "RotationProjection", "TouchPoint",
+               "EyeToHandSolution", "PayloadSolution", "CameraAfterTurn", "TurnAnchors", "RotationProjection", "TouchPoint",
                "Event", "EyeToHandResult", "EyeToHandPointsResult", "PayloadResult", "IdentificationError"}
 
 
@@ -175,7 +176,7 @@ def test_every_valid_call_works():
 
 def test_every_public_function_and_class_is_a_target():
     for module in (sustainable_identifier, eye_to_hand, payload, batch, rotation, touch, coordination,
-                   observability):
+                   observability, camera_turn):
         for attr, value in vars(module).items():
             if attr.startswith("_") or getattr(value, "__module__", None) != module.__name__:
                 continue
@@ -295,14 +296,14 @@ BAD_CALLS = [
     _bad("eye_to_hand_points.joint_covariance", 3, [P2], "p_HP"),
     _bad("eye_to_hand_points.joint_covariance", 4, [1.0, -1.0], "weights"),
     _bad("eye_to_hand_points.joint_covariance", 4, [1.0, np.nan], "weights"),
-    _bad("eye_to_hand_points.camera_after_turn", 0, None, "R_WC0"),
-    _bad("eye_to_hand_points.camera_after_turn", 2, points.TurnAnchors(ZERO_ROW, Q0, B1), "b0"),
-    _bad("eye_to_hand_points.camera_after_turn", 2, points.TurnAnchors(B0, Q0[:5], B1), "q0"),
-    _bad("eye_to_hand_points.camera_after_turn", 2, (B0, Q0, B1), "anchors"),
-    _bad("eye_to_hand_points.camera_after_turn", 5, 0, "min_points"),
-    _bad("eye_to_hand_points.camera_after_turn", 6, 0, "iterations"),
-    _bad("eye_to_hand_points.camera_after_turn", 7, -1e-3, "max_rotation_sd"),
-    _bad("eye_to_hand_points.camera_after_turn", 7, "0.1", "max_rotation_sd"),
+    _bad("camera_turn.camera_after_turn", 0, None, "R_WC0"),
+    _bad("camera_turn.camera_after_turn", 2, camera_turn.TurnAnchors(ZERO_ROW, Q0, B1), "b0"),
+    _bad("camera_turn.camera_after_turn", 2, camera_turn.TurnAnchors(B0, Q0[:5], B1), "q0"),
+    _bad("camera_turn.camera_after_turn", 2, (B0, Q0, B1), "anchors"),
+    _bad("camera_turn.camera_after_turn", 5, 0, "min_points"),
+    _bad("camera_turn.camera_after_turn", 6, 0, "iterations"),
+    _bad("camera_turn.camera_after_turn", 7, -1e-3, "max_rotation_sd"),
+    _bad("camera_turn.camera_after_turn", 7, "0.1", "max_rotation_sd"),
     _bad("payload.build_A", 2, None, "g_W"),
     _bad("batch.calibrate_eye_to_hand", 0, None, "p_C"),
     _bad("batch.calibrate_eye_to_hand", 1, X_WH[:, :3, :3], "X_WH"),
@@ -359,6 +360,7 @@ BAD_CALLS = [
     _bad("coordination.CoordinationRule", 4, "yes", "adopt_refinements"),
     _bad("coordination.allowable_error", 1, np.nan, "expected_mse"),
     _bad("coordination.step", 0, None, "state"),
+    _bad("coordination.step", 0, np.full(15, np.inf), "state"),
     _bad("coordination.step", 1, None, "rule"),
     _bad("coordination.step", 2, np.inf, "time"),
     _bad("coordination.IdentifierReport", 0, "yes", "converged"),

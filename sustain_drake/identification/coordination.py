@@ -283,6 +283,9 @@ def _checked_step_arguments(state, rule, time, report, camera_moving, camera_mov
     as a float64 vector."""
     if not (type(state) is np.ndarray and state.dtype is F64 and state.shape == (STATE_SIZE,)):
         state = real_array("state", state, (STATE_SIZE,), finite=False)
+    if not (np.isfinite(state[MODE]) and np.isfinite(state[LAST_SAMPLE])):
+        raise IdentificationError(f"state: its mode and sample count must be finite, got {state[MODE]} "
+                                  f"and {state[LAST_SAMPLE]} (a state from initial_state and step)")
     instance("rule", rule, CoordinationRule, "a CoordinationRule")
     real_number("time", time)
     instance("report", report, IdentifierReport, "an IdentifierReport")

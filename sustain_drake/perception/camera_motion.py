@@ -74,7 +74,7 @@ new view starts once the scene rests again. When a declared move's view after ha
 frames, the anchors seen in both views (each in at least half of either's frames) give the turn's
 correspondences: per anchor its bearing before and after (unit vectors in C0 and C1) and its point
 before and after (in C0 and C1, NaN without depth). The camera's rotation and translation are
-estimated from them downstream (``identification.eye_to_hand_points.camera_after_turn``, with the tool
+estimated from them downstream (``identification.camera_turn.camera_after_turn``, with the tool
 points for the translation): a far scene pins the rotation to a few hundredths of a degree; its
 bearings hardly show the position, its depth on both sides does (to the depth noise over the
 anchors), enough to match the tool's points again.

@@ -19,12 +19,8 @@ from sustain_drake.identification.candidates.fitting import (
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.identification.eye_to_hand import pack_x
-from sustain_drake.identification.eye_to_hand_points import (
-    TurnAnchors,
-    camera_after_turn,
-    camera_given_points,
-    spread_off_line,
-)
+from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
+from sustain_drake.identification.eye_to_hand_points import camera_given_points, spread_off_line
 
 
 def with_scene_turn(bank: CandidateBank, scene_turn) -> CandidateBank:
