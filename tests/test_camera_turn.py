@@ -12,10 +12,10 @@ from scipy.spatial.transform import Rotation
 from test_candidates import CRITERIA, DT, HANDOVER, P_TOOL, TRUTH, hand_pose, seen
 
 from sustain_drake.identification import candidates
+from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
 from sustain_drake.identification.candidates import CandidateBank
 from sustain_drake.identification.coordination import CAMERA_MOVED
 from sustain_drake.identification.eye_to_hand import build_A, pack_x
-from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
 from sustain_drake.identification.rotation import nearest_rotation
 from sustain_drake.perception import camera_motion
 from sustain_drake.perception.camera_motion import CameraMotionParams, CameraMotionState, SceneTurn

@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
 from sustain_drake.identification.candidates.bank import Adoption, CandidateBank, with_camera
 from sustain_drake.identification.candidates.fitting import (
     S_of,
@@ -19,7 +20,6 @@ from sustain_drake.identification.candidates.fitting import (
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.identification.eye_to_hand import pack_x
-from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
 from sustain_drake.identification.eye_to_hand_points import camera_given_points, spread_off_line
 
 
