@@ -432,7 +432,8 @@ def test_the_views_since_a_reset_confirm_the_previous_camera_only_where_it_is():
                       scene_still_since=0.0)
         kept = [bank.find(i) for i in points]
         previous = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
-        p_HP = candidates.fitting.best_p_HP_given_camera(kept[0].statistic, TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3])
+        R_WC, p_WC = TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3]
+        p_HP = candidates.fitting.best_p_HP_given_camera(kept[0].statistic, R_WC, p_WC)
         best = candidates.bank.with_camera(kept[0], previous, p_HP, 3 * (0.5e-3) ** 2)
         pool = candidates.frame.Pool(kept, [], frozenset(), True, 0.0, -1, (), math.inf)
         assert candidates.slip_recovery.views_confirm(best, pool, params) is confirmed

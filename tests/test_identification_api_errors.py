@@ -161,7 +161,8 @@ TARGETS = {
 
 # Result records, not checked (built by the API itself), and the checks themselves.
 NOT_TARGETS = {"EigenSolution", "Verdict", "SolutionProperties", "FormulationIdentifier", "EyeToHandEstimate",
-               "EyeToHandSolution", "PayloadSolution", "CameraAfterTurn", "TurnAnchors", "RotationProjection", "TouchPoint",
+               "EyeToHandSolution", "PayloadSolution", "CameraAfterTurn", "TurnAnchors", "RotationProjection",
+               "TouchPoint",
                "Event", "EyeToHandResult", "EyeToHandPointsResult", "PayloadResult", "IdentificationError"}
 
 
