@@ -15,6 +15,7 @@ a bad argument.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -164,6 +165,54 @@ def position_given_rotation(S_list: list[np.ndarray], p_HP: np.ndarray, R_WC: np
     R_WC = real_array("R_WC", R_WC, MATRIX3)
     P, n = _known_points_statistic(S_list, p_HP)
     return _position_given_rotation(P, n, R_WC) if n > 0 else None
+
+
+class PositionAndPoints(NamedTuple):
+    """``position_and_points_given_rotation``'s answer: the camera position ``p_WC`` (m), each point's
+    ``p_HP`` (K x 3, m), the position's covariance (3 x 3, m^2) and each point's mean squared
+    Eq. (30) error with them (K, m^2)."""
+
+    p_WC: np.ndarray
+    p_HP: np.ndarray
+    covariance: np.ndarray
+    mean_squared_errors: np.ndarray
+
+
+def position_and_points_given_rotation(S_list: list[np.ndarray], R_WC: np.ndarray):
+    """The camera position and every point's ``p_HP`` that best explain K points' samples (``S_k``,
+    raw statistics) when the camera's rotation ``R_WC`` is known: Eq. (35)'s least squares in
+    ``p_WC`` and the ``p_HP`` together, linear (3 + 3K unknowns). Each ``p_HP`` is eliminated
+    (``p_HP = -S_qq^-1 (S_qp p_WC + S_qc c)``, ``c = [vec R_WC; 1]``), leaving the 3 x 3 Schur
+    complement ``H`` in ``p_WC``; the position's covariance is ``s^2 H^-1`` with ``s^2`` the residual
+    sum over its ``3 n - 3 - 3K`` degrees of freedom (``n`` samples in all). The hand must turn: a
+    translation moves ``p_WC`` and every ``p_HP`` alike. Returns a ``PositionAndPoints``, or None
+    when ``H`` is singular (the hand did not turn) or there are too few samples for the degrees of
+    freedom. IdentificationError unless ``S_list`` is a non-empty list of finite 16 x 16 statistics
+    and ``R_WC`` a finite 3 x 3 matrix."""
+    S_list = _statistics(S_list)
+    if not S_list:
+        raise IdentificationError("position_and_points_given_rotation needs at least one statistic")
+    R_WC = real_array("R_WC", R_WC, MATRIX3)
+    c = np.concatenate([R_WC.reshape(9, order="F"), [1.0]])
+    fixed = np.r_[0:9, 15]
+    H, g, eliminations = np.zeros((3, 3)), np.zeros(3), []
+    for S in S_list:
+        S_qq = S[12:15, 12:15]
+        if not S[9, 9] > 0.0:
+            return None
+        solve_q = np.linalg.solve(S_qq, np.column_stack([S[12:15, 9:12], S[12:15, fixed] @ c]))
+        H += S[9:12, 9:12] - S[9:12, 12:15] @ solve_q[:, :3]
+        g += S[9:12, fixed] @ c - S[9:12, 12:15] @ solve_q[:, 3]
+        eliminations.append(solve_q)
+    n = float(sum(S[9, 9] for S in S_list))
+    dof = 3.0 * n - 3.0 - 3.0 * len(S_list)
+    if not (dof > 0 and np.linalg.cond(H) < 1e12):
+        return None
+    p_WC = -np.linalg.solve(H, g)
+    P = np.array([-(q[:, :3] @ p_WC + q[:, 3]) for q in eliminations])
+    squared = _squared_errors(S_list, R_WC, p_WC, P)
+    covariance = float(squared.sum()) / dof * np.linalg.inv(H)
+    return PositionAndPoints(p_WC, P, covariance, squared / _counts(S_list))
 
 
 def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):

@@ -39,7 +39,9 @@ class Adoption:
     """A leader chosen (what the state machine adopts): when, which feature, its statistic, the
     estimate, and how it was identified (``"identified"``: all 16 unknowns, the paper's verdict;
     ``"previous camera"``: the camera of the model abandoned at the last reset explains the
-    candidate's samples, only its ``p_HP`` is new)."""
+    candidate's samples, only its ``p_HP`` is new; after a camera move ``"scene turn, tool points
+    kept"``, ``"previous tool points"`` and ``"scene turn, points since the move"``, see
+    ``camera_move_recovery``)."""
 
     time: float
     feature_id: int

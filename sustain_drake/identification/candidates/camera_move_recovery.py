@@ -1,8 +1,12 @@
 """Recovery after a camera move (beyond the paper): the points the abandoned model observed keep their
 ``p_HP`` (a moved camera leaves the held tool unchanged), so their samples since the move give the new
 camera in closed form (``keep_tool_points``: 6 unknowns, not 15), and with the static scene's turn across
-the move, the camera is the old one turned, placed by the tool points."""
+the move, the camera is the old one turned, placed by the tool points. Where none of those points is
+found again (a tool without corners: its anchored points are wherever their tracks began), the turned
+camera is placed by the points tracked since the move, each with a ``p_HP`` of its own (3 + 3K
+unknowns)."""
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -10,6 +14,8 @@ import numpy as np
 from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
 from sustain_drake.identification.candidates.bank import Adoption, CandidateBank, with_camera
 from sustain_drake.identification.candidates.fitting import (
+    FIRST_CHOICE_POINTS,
+    REGION_95,
     S_of,
     best_p_HP_given_camera,
     explained,
@@ -20,7 +26,11 @@ from sustain_drake.identification.candidates.fitting import (
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.identification.eye_to_hand import pack_x
-from sustain_drake.identification.eye_to_hand_points import camera_given_points, spread_off_line
+from sustain_drake.identification.eye_to_hand_points import (
+    camera_given_points,
+    position_and_points_given_rotation,
+    spread_off_line,
+)
 
 
 def with_scene_turn(bank: CandidateBank, scene_turn) -> CandidateBank:
@@ -50,13 +60,18 @@ def recover(bank: CandidateBank, params: CandidateParams, seen: SeenFrame, pool:
     if found is None:
         kind = "previous tool points"
         found = _camera_from_known_points(kept, dict(bank.known_points), params, bank.adopted_mse)
+    if found is None and bank.turned_R_WC is not None:
+        kind = "scene turn, points since the move"
+        found = _camera_from_turn_and_new_points(kept, bank, params)
     if found is None:
         return pool
     x, mse, leader = found
     best = next(c for c in kept if c.feature_id == leader)
     expected = min(mse, bank.adopted_mse) if params.keep_allowable_error else mse
-    best = with_camera(best, x, x[12:15].copy(), expected,
-                       "converged: the tool points kept, the camera re-identified")
+    verdict = ("converged: the camera turned as the scene shows, placed by the points since the move"
+               if kind == "scene turn, points since the move"
+               else "converged: the tool points kept, the camera re-identified")
+    best = with_camera(best, x, x[12:15].copy(), expected, verdict)
     kept = [best if c.feature_id == leader else c for c in kept]
     adoptions = pool.adoptions + (Adoption(float(seen.time), leader, best.statistic.copy(),
                                            best.admitted, pool.round_start, best.solution.estimate, kind),)
@@ -179,6 +194,38 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
         # leave no such offset.
         return None
     return _leading(fit[1], fit[2], fit[0], next(iter(known.values())))
+
+
+def _camera_from_turn_and_new_points(kept, bank: CandidateBank, params: CandidateParams):
+    """The camera turned as the static scene shows (``bank.turned_R_WC``), placed with the points
+    tracked since the move, each with its own ``p_HP`` (``position_and_points_given_rotation``):
+    candidates with ``observe_min_samples`` samples over ``min_rotation_spread`` of hand rotation
+    (else a point of any link fits), at least ``FIRST_CHOICE_POINTS`` of them (one point fits a
+    camera that another must confirm), while one misfits (over ``observe_consistency`` of the
+    adopted RMS error: a point of the static scene or of another link) the worst left out, as long
+    as more than half are left. The position's 95 % region must lie within ``camera_accuracy``
+    and the position within the turned camera's window (``_turn_window``). Returns
+    ``(x, mse, feature_id)`` (the point with the most samples) or None."""
+    points = [c for c in kept if c.solution.num_samples >= params.observe_min_samples
+              and rotation_spread(c.statistic) >= params.min_rotation_spread]
+    total, limit = len(points), params.observe_consistency**2 * bank.adopted_mse
+    while len(points) >= FIRST_CHOICE_POINTS and 2 * len(points) > total:
+        found = position_and_points_given_rotation([S_of(c.statistic) for c in points], bank.turned_R_WC)
+        if found is None:
+            return None
+        worst = int(np.argmax(found.mean_squared_errors))
+        if found.mean_squared_errors[worst] <= limit:
+            break
+        points = points[:worst] + points[worst + 1:]
+    else:
+        return None
+    p_turned, window = _turn_window(bank, params)
+    if not (REGION_95 * math.sqrt(float(np.trace(found.covariance))) <= params.camera_accuracy
+            and np.linalg.norm(found.p_WC - p_turned) <= window):
+        return None
+    k = max(range(len(points)), key=lambda i: points[i].solution.num_samples)
+    return (pack_x(bank.turned_R_WC, found.p_WC, found.p_HP[k]), float(found.mean_squared_errors[k]),
+            points[k].feature_id)
 
 
 def _turn_window(bank: CandidateBank, params: CandidateParams) -> tuple[np.ndarray, float]:
