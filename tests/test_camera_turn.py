@@ -428,8 +428,8 @@ def test_after_a_head_turn_points_never_known_place_the_turned_camera_with_their
     linear), once they have ``observe_min_samples`` samples and the position's 95 % region lies
     within ``camera_accuracy`` (2 mm here: it holds 95 % of such cameras; 1.6 mm off in the first
     run, 3.9 mm in the second's noise draws, none beyond the 5 mm of a wrong adoption). A point of
-    the static scene among them (taken for the body) misfits and is left out. The full identification (16 unknowns per
-    point) comes later; without the turn it is the only way."""
+    the static scene among them (taken for the body) misfits and is left out. The full
+    identification (16 unknowns per point) comes later; without the turn it is the only way."""
     params = replace(HANDOVER, max_observers=3, keep_tool_points=True, min_rotation_spread=0.05,
                      camera_accuracy=0.002, camera_rotation_accuracy=np.radians(0.2))
     X1 = turned(TRUTH.X_WC, TURN)
