@@ -21,6 +21,7 @@ from sustain_drake.identification.candidates.fitting import joint_refined, withi
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.observation import consistent
 from sustain_drake.identification.candidates.params import CandidateParams
+from sustain_drake.identification.rotation import nearest_rotation, rotation_angle
 
 
 def recover(bank: CandidateBank, params: CandidateParams, seen: SeenFrame, pool: Pool) -> Pool:
@@ -62,6 +63,6 @@ def views_confirm(best: Candidate, pool: Pool, params: CandidateParams) -> bool:
     estimate = refined.solution.estimate
     if not within_accuracy(statistics, estimate, params):
         return False
-    turn = np.clip((np.trace(previous.R_WC.T @ estimate.R_WC) - 1.0) / 2.0, -1.0, 1.0)
+    turn = rotation_angle(nearest_rotation(previous.R_WC.T @ estimate.R_WC))
     return bool(np.linalg.norm(estimate.p_WC - previous.p_WC) <= params.camera_accuracy
-                and math.acos(turn) <= params.camera_rotation_accuracy)
+                and turn <= params.camera_rotation_accuracy)
