@@ -1,6 +1,7 @@
 """The camera notices its own motion from the static scene (perception.camera_motion), on synthetic
 feature sets, and its Drake system."""
 
+import cv2
 import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
@@ -308,3 +309,93 @@ def test_a_slow_pan_while_the_arm_rests_is_a_camera_move():
 
     state, out = run(scene, 60, jitter, state=state, start=60)
     assert state.moves == 1 and out[:, 0].max() == 0
+
+
+def texture(shape, seed):
+    """Print at every scale (posters, boxes, their letters): blobs of 2 to 32 px, grey levels."""
+    rng = np.random.default_rng(seed)
+    image = sum(cv2.GaussianBlur(rng.uniform(-1, 1, shape).astype(np.float32), (0, 0), sigma) * sigma
+                for sigma in (2.0, 8.0, 32.0))
+    return cv2.normalize(image, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+
+
+def textured_frames(shift_px, seed=5, person_step=None):
+    """A still textured wall seen before and after an image shift of ``shift_px`` (px, a pan of
+    ``shift_px / f`` rad): per view the grey image and its strongest corners (pixels, and their
+    points at 2 m). ``person_step``: a person (a textured block over two thirds of the image)
+    stands in the first view and has walked that many px in the second, where its corners are
+    not anchors (it moves)."""
+    wall = texture((300, 520), seed)
+    person = texture((160, 220), seed + 1)
+    views = []
+    for k, dx in enumerate((0, shift_px)):
+        gray = np.ascontiguousarray(wall[30:30 + SIZE[1], 50 + dx:50 + dx + SIZE[0]])
+        mask = None
+        if person_step is not None:
+            x = 40 + k * person_step
+            gray[40:200, x:x + 220] = person[:, :min(220, SIZE[0] - x)]
+            if k == 1:
+                mask = np.full(gray.shape, 255, np.uint8)
+                mask[30:210, x - 10:] = 0
+        px = cv2.goodFeaturesToTrack(gray, 60, 0.01, 10, mask=mask).reshape(-1, 2).astype(float)
+        p_CP = np.column_stack([(px - [INTRINSICS.cx, INTRINSICS.cy]) / INTRINSICS.fx * 2.0,
+                                np.full(len(px), 2.0)])
+        views.append((gray, px, p_CP))
+    return views
+
+
+def run_gap(shift_px, with_image=True, gap_frames=6, person_step=None):
+    """The arm moving throughout; 40 frames of the wall, ``gap_frames`` with no track at all (a
+    person in front of the camera), then the wall shifted by ``shift_px`` with every track new
+    (``person_step``: see ``textured_frames``). Returns the final state and the frame of the first
+    declared move (None)."""
+    (g0, px0, p0), (g1, px1, p1) = textured_frames(shift_px, person_step=person_step)
+    state, declared = CameraMotionState(), None
+    for k in range(120):
+        if k < 40:
+            gray, ids, px, p = g0, np.arange(len(px0)), px0, p0
+        elif k < 40 + gap_frames:
+            gray, ids, px, p = g1, np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3))
+        else:
+            gray, ids, px, p = g1, 1000 + np.arange(len(px1)), px1, p1
+        frame = TrackedFeatures(ids=ids, p_px=px, flow_px=np.zeros_like(px), p_CP=p,
+                                valid=np.ones(len(ids), bool), time=k / FPS)
+        state = camera_motion.step(state, frame, np.zeros(len(ids), bool), np.array([True]), PARAMS, SIZE,
+                                   INTRINSICS, gray if with_image else None)
+        if declared is None and state.moves:
+            declared = k
+    return state, declared
+
+
+def test_a_move_while_the_tracks_were_broken_is_found_from_the_still_scenes_image():
+    """Every track ends while the camera pans 12 px (a person passing in front of it): the new
+    tracks never moved, so only the still scene's image before and after shows the move; the
+    reference's anchors followed into the image after are its turn (each the same corner, 12 px
+    over). Without the image the move is missed; with no move, none is found."""
+    state, k = run_gap(12)
+    assert k is not None and k < 40 + 6 + 15 + PARAMS.turn_frames + 3
+    assert state.moves == 1 and abs(state.accumulated_px - 12.0) < 0.5
+    turn = state.turn
+    assert turn.move == 1 and len(turn) >= 20 and turn.start < 40 / FPS
+    def pixels(b):
+        return b[:, :2] / b[:, 2:] * INTRINSICS.fx + [INTRINSICS.cx, INTRINSICS.cy]
+
+    # Each the same corner (Lucas-Kanade to a few hundredths of a pixel, 0.33 px on one), its depth
+    # after from the new track on it.
+    off = np.linalg.norm(pixels(turn.b1) - pixels(turn.b0) - [-12.0, 0.0], axis=1)
+    assert np.median(off) < 0.01 and off.max() < PARAMS.inlier_px
+    assert np.allclose(turn.q0[:, 2], 2.0) and np.allclose(turn.q1[:, 2], 2.0)
+    assert run_gap(12, with_image=False)[0].moves == 0
+    # A pan of 80 px (0.14 rad; a quarter of the image): the pyramid follows it.
+    far, _ = run_gap(80)
+    assert far.moves == 1 and abs(far.accumulated_px - 80.0) < 0.5 and len(far.turn) >= 8
+    still, k_still = run_gap(0)
+    assert k_still is None and still.reference is not None and not still.gap
+    # A person who stood still among the reference's anchors (most of them) has walked 30 px: the
+    # reference's anchors agree on the person's step, the still scene now (the anchors followed
+    # back) on none. No move.
+    (g0, px0, _), _ = textured_frames(0, person_step=30)
+    on_person = np.mean((px0[:, 0] >= 40) & (px0[:, 1] >= 40) & (px0[:, 1] < 200))
+    assert on_person > 0.6
+    walked, k_walked = run_gap(0, person_step=30)
+    assert k_walked is None and walked.moves == 0

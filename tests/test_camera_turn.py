@@ -14,7 +14,7 @@ from test_candidates import CRITERIA, DT, HANDOVER, P_TOOL, TRUTH, hand_pose, se
 from sustain_drake.identification import candidates
 from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
 from sustain_drake.identification.candidates import CandidateBank
-from sustain_drake.identification.coordination import CAMERA_MOVED
+from sustain_drake.identification.coordination import CAMERA_MOVED, OBSERVATION_FAILED
 from sustain_drake.identification.eye_to_hand import build_A, pack_x
 from sustain_drake.identification.rotation import nearest_rotation
 from sustain_drake.perception import camera_motion
@@ -245,7 +245,7 @@ POINTS = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, 
 
 def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399 * DT, 404 * DT),
                   resets=(400,), ended=None, body_after=True, static_after=None, corners=True,
-                  static_body=False):  # fmt: skip
+                  static_body=False, observation_first=False):  # fmt: skip
     """Three tool points observed under the true model; at frame 400 the head turns (``TURN`` about
     ``PIVOT_C``: 10 deg, 8 mm) and the state machine resets for the camera's move, the model
     cleared. Every track ends at the turn: the same points come back as new tracks (ids + 100), or
@@ -256,7 +256,9 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
     the tracks after the move are flagged body; ``static_after``: ``{id: p_W}``, points of the
     static scene tracked after the move (body only with ``static_body``: a detector's mistake);
     ``corners``: whether the hand's points are
-    centrally symmetric corners (the refiner's first choice; else anchored points). Returns the bank
+    centrally symmetric corners (the refiner's first choice; else anchored points);
+    ``observation_first``: the first reset is the observation's (the camera move declared at the
+    second). Returns the bank
     and the frame of the first adoption after the move (None)."""
     X1 = turned(TRUTH.X_WC, TURN)
     bank, rng = CandidateBank(), np.random.default_rng(3)
@@ -285,7 +287,9 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
         reset = float(sum(k >= r for r in resets))
         frame = candidates.FrameInput(k * DT, reset, X, k * DT, np.array(ids), np.array(p),
                                       np.ones(len(p), bool), np.array(body), adopted, allowable_error=1e-4,
-                                      scene_turn=given, reset_reason=CAMERA_MOVED,
+                                      scene_turn=given,
+                                      reset_reason=OBSERVATION_FAILED if observation_first and reset == 1
+                                      else CAMERA_MOVED,
                                       symmetric=np.array(symmetric))
         bank = candidates.step(bank, params, CRITERIA, frame)
         if after and bank.leader >= 0:
@@ -328,10 +332,22 @@ def test_after_a_head_turn_the_scene_and_the_tool_points_give_the_camera_at_once
 
     bank, k_few = run_head_turn(params, few, frames=460)
     assert k_few is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
-    # A turn from another move (it ended before the reset) is not used.
+    # A turn from another move (it started before the reset that preceded the model) is not used.
     bank, k_stale = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)),
-                                  frames=460, window=(300 * DT, 350 * DT))  # fmt: skip
+                                  frames=460, window=(20 * DT, 30 * DT), resets=(40, 400))  # fmt: skip
     assert k_stale is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
+    # The observation resets first (the tracks lost the move); the move is declared 10 frames
+    # later with no leader in between: the model the observation cleared is the camera's before
+    # the move, its points kept.
+    bank, k_late = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)),
+                                 resets=(400, 410), observation_first=True)  # fmt: skip
+    assert bank.adoptions[-1].kind == "scene turn, tool points kept" and k_late - 410 < 30
+    assert np.linalg.norm(bank.adoptions[-1].estimate.p_WC - X1[:3, 3]) < 1e-3
+    # Had the observation reset before the move started, the points would not be kept (a slip
+    # moves them): the turned camera waits for points since the move.
+    bank, k_slip = run_head_turn(params, lambda X0, X1: scene_turn(X0, X1, static_scene(X0)),
+                                 resets=(395, 410), observation_first=True, frames=460)  # fmt: skip
+    assert k_slip is None or bank.adoptions[-1].kind != "scene turn, tool points kept"
 
 
 def test_the_scene_depth_places_the_turned_camera_so_that_a_mark_is_not_taken_for_its_neighbour():

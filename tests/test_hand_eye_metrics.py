@@ -118,10 +118,23 @@ def test_an_undetected_camera_move_cannot_hide_a_stale_camera():
     X_WC = np.array([RigidTransform(P_WC + ([0.0, 0.05, 0.0] if t >= 5.0 else 0.0)).GetAsMatrix4().reshape(-1)
                      for t in TIMES])
     undetected = m.excused_windows([{"time_s": 5.0, "detected_s": None}], 1.0)
-    worst = m.worst_model_in_use(TIMES, x_log, TIMES, X_WC, undetected)
+    observing = np.ones(len(TIMES), bool)
+    worst = m.worst_model_in_use(TIMES, x_log, observing, TIMES, X_WC, undetected)
     assert worst["camera_position_error_mm"] == pytest.approx(50.0) and worst["position_at_s"] > 6.0
     detected_late = m.excused_windows([{"time_s": 5.0, "detected_s": 30.0}], 1.0)
-    assert m.worst_model_in_use(TIMES, x_log, TIMES, X_WC, detected_late)["camera_position_error_mm"] < 1e-9
+    late = m.worst_model_in_use(TIMES, x_log, observing, TIMES, X_WC, detected_late)
+    assert late["camera_position_error_mm"] < 1e-9
+    # Detected at 6 s: the loop identifies from then on (no model vouched for), until it observes
+    # again at 15 s with a camera where the truth is.
+    detected = m.excused_windows([{"time_s": 5.0, "detected_s": 6.0}], 1.0)
+    again = TIMES >= 15.0
+    x_again = np.array([x if t < 15.0 else x_of(np.zeros(3), P_WC + [0.0, 0.05, 0.0])
+                        for t, x in zip(TIMES, x_log, strict=True)])
+    worst = m.worst_model_in_use(TIMES, x_again, (TIMES <= 6.0) | again, TIMES, X_WC, detected)
+    assert worst["camera_position_error_mm"] < 1e-9
+    # Counted while observing: the stale camera kept after the detection is the one in use.
+    kept = m.worst_model_in_use(TIMES, x_again, observing, TIMES, X_WC, detected)
+    assert kept["camera_position_error_mm"] == pytest.approx(50.0)
 
 
 def test_the_tool_point_in_use_target_reads_its_worst():

@@ -108,6 +108,14 @@ def test_tracks_the_moving_scene_and_reports_points_and_visual_change():
     cols = np.arange(grid.num_cells) % grid.cols
     assert (sdot[cols < grid.cols // 2 - 1] > 0).mean() > 0.8
     assert np.all(sdot[cols >= grid.cols // 2 + 1] == 0)     # right half still at t = 0.8
+    # The frame the tracks were found in, in grey: the scene's image at that frame's time.
+    gray = tracker.GetOutputPort("gray_image").Eval(ctx)
+    at_frame = diagram.CreateDefaultContext()
+    at_frame.SetTime(f.time)
+    scene = diagram.GetSubsystemByName("scene")
+    color = scene.GetOutputPort("color_image").Eval(scene.GetMyContextFromRoot(at_frame)).data
+    assert gray.shape == color.shape[:2] and gray.dtype == np.uint8
+    assert np.array_equal(gray, cv2.cvtColor(color, cv2.COLOR_RGBA2GRAY))
 
 
 def test_empty_images_from_a_constant_source_are_skipped_without_raising():
@@ -123,6 +131,7 @@ def test_empty_images_from_a_constant_source_are_skipped_without_raising():
     assert state.frames == 0 and state.skipped >= 15
     assert np.all(tracker.GetOutputPort("visual_change").Eval(ctx) == 0)
     assert len(tracker.GetOutputPort("tracked_features").Eval(ctx)) == 0
+    assert tracker.GetOutputPort("gray_image").Eval(ctx).shape == (0, 0)
 
 
 def test_a_frame_not_newer_than_the_last_is_skipped_when_image_time_is_connected():

@@ -254,13 +254,14 @@ def evaluate(handle, diagram, context) -> dict:
     # The model in use (adopted, and refined while observing when the rule adopts refinements)
     # just before each disturbance and at the end: what the robot works with.
     t_x, x_log = _log(handle, diagram, context, "adopted_x")
+    observing = _observing(handle, diagram, context, t_x)
     for d in disturbances:
         d["model_in_use_before"] = m.camera_errors(t_x, x_log, t_pose, X_WC_log, d["time_s"] - 0.1)
     # The worst camera and tool point the loop relied on, outside each change's window from the
     # disturbance to its detection (the model is stale there by definition); a change never
     # detected excuses only the detection target's time after it.
     windows = m.excused_windows(disturbances, target_bound("hand_eye", "detection_latency_s"))
-    worst = m.worst_model_in_use(t_x, x_log, t_pose, X_WC_log, windows)
+    worst = m.worst_model_in_use(t_x, x_log, observing, t_pose, X_WC_log, windows)
     t_tool, tool = _tool_point_series(handle, diagram, context, points)
     later = m.before_next(t_tool, tool, disturbances, float(t_tool[-1]))
     for d, at_later in zip(disturbances, later, strict=True):
@@ -331,10 +332,15 @@ def _tool_point_series(handle, diagram, context, points) -> tuple[np.ndarray, np
     """The log's times and, at each, the error (m) of the tool point in use (NaN: none in use;
     ``hand_eye_metrics.tool_point_errors``)."""
     t_x, x_log = _log(handle, diagram, context, "adopted_x")
-    t_mode, mode = _log(handle, diagram, context, "mode")
-    observing = np.array([m.at(t_mode, mode, t)[0] == coordination.OBSERVE for t in t_x], dtype=bool)
     t_pose, X_HT_log = _log(handle, diagram, context, "true_X_HT")
-    return t_x, m.tool_point_errors(t_x, x_log, observing, t_pose, X_HT_log, points)
+    return t_x, m.tool_point_errors(t_x, x_log, _observing(handle, diagram, context, t_x), t_pose, X_HT_log,
+                                    points)
+
+
+def _observing(handle, diagram, context, times) -> np.ndarray:
+    """Per time of ``times``: the state machine observes (a model is vouched for)."""
+    t_mode, mode = _log(handle, diagram, context, "mode")
+    return np.array([m.at(t_mode, mode, t)[0] == coordination.OBSERVE for t in times], dtype=bool)
 
 
 def _camera_moves(handle, diagram, context) -> list[float] | None:

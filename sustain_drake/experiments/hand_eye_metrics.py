@@ -111,11 +111,13 @@ def _excused(t: float, windows) -> bool:
     return any(a <= t <= b for a, b in windows)
 
 
-def worst_model_in_use(t_x, x_log, t_pose, X_WC_log, windows: list) -> dict | None:
+def worst_model_in_use(t_x, x_log, observing, t_pose, X_WC_log, windows: list) -> dict | None:
     """The largest camera position and rotation errors of the adopted ``x`` over the log, where
-    one is adopted and outside the ``windows`` ``(from, to)``, with their times (None: never
-    adopted there)."""
-    errors = [camera_errors(t_x, x_log, t_pose, X_WC_log, float(t)) for t in t_x if not _excused(t, windows)]
+    one is adopted, the loop observes (``observing``, per sample: after a detected change it
+    identifies and vouches for no model, as ``tool_point_errors``) and outside the ``windows``
+    ``(from, to)``, with their times (None: never adopted there)."""
+    errors = [camera_errors(t_x, x_log, t_pose, X_WC_log, float(t))
+              for t, o in zip(t_x, observing, strict=True) if o and not _excused(t, windows)]
     errors = [e for e in errors if e is not None]
     if not errors:
         return None

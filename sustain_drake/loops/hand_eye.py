@@ -263,6 +263,7 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
             camera_info=info))  # fmt: skip
         camera.set_name("camera_motion_detector")
         builder.Connect(tracker.GetOutputPort("tracked_features"), camera.GetInputPort("tracked_features"))
+        builder.Connect(tracker.GetOutputPort("gray_image"), camera.GetInputPort("gray_image"))
         for name in ("feature_on_body", "body_feature_cells"):
             builder.Connect(detector.GetOutputPort(name), camera.GetInputPort(name))
         builder.Connect(camera.GetOutputPort("camera_motion"), machine.GetInputPort("camera_motion"))

@@ -44,6 +44,16 @@ goes up, once per episode) as soon as it has ``min_frames`` moving frames (one f
 tracking glitch, a camera moves over frames) and the composed motion's displacement reaches
 ``move_px``.
 
+**A move the tracks missed** (``scene_reference``; with the frame's grey image). The anchors must
+live through a move for its frames to be judged: a person passing in front of the camera ends them,
+and a turn thins them below ``min_background`` (its perspective takes the image's edges off the
+similarity). After such a *gap* (a frame not judged, or an episode that ended before it reached
+``move_px``) the new anchors are born in the moved image and see no motion. So a still frame with
+its anchors is kept as a reference (refreshed every ``REFERENCE_INTERVAL`` s while still) and, once
+the scene is still again after a gap (a view of ``turn_frames`` frames), its anchors are followed
+from its image into the current one: a displacement of ``move_px`` or more is a camera move,
+declared then, the followed anchors its turn.
+
 **Static scene is no hand candidate** (``static_features``, ``exclude_static``). A feature that
 stayed still against the scene through ``anchor_time`` s of arm motion is not on the hand (every
 joint moves the hand, the last link), whatever cell it lies in. The hand-eye candidates skip such
@@ -91,10 +101,17 @@ import cv2
 import numpy as np
 
 from sustain_drake.perception.optical_flow import PinholeIntrinsics, TrackedFeatures, pinhole_points
+from sustain_drake.perception.scene_reference import MIN_MATCHES, SceneReference, match
 
 # The view of the still scene is a running mean over at most this many frames (1 s at 30 Hz): a
 # slow drift of the camera below ``still_px`` does not smear it.
 VIEW_FRAMES = 30
+# s between refreshes of the still scene's reference (a still camera's image changes only slowly:
+# lights, a person's shadow; a refresh keeps a reference to the frame's grey image, no copy).
+REFERENCE_INTERVAL = 1.0
+# s a reference that no view after a gap matched is kept before a new one replaces it: a move
+# older than this was found by the observation rule, if it mattered.
+MAX_REFERENCE_AGE = 10.0
 
 
 @dataclass
@@ -200,7 +217,10 @@ class CameraMotionState:
     turn is formed, or when the scene had not been at rest before); ``episode_start``: the current
     or last episode's first moving frame (s); ``turn``: the last move's ``SceneTurn``;
     ``judged_still_since``: since when every frame was judged and still, outside an episode (s; inf
-    now: moving, in an episode, or too few anchors to judge), so the camera has not moved since."""
+    now: moving, in an episode, or too few anchors to judge), so the camera has not moved since;
+    ``reference``: a still frame of the scene (``scene_reference.SceneReference``, with the grey
+    image only), ``gap``: since it was taken a frame was not judged or an episode ended undeclared, so
+    the tracks may have missed a move (checked against it when the scene is still again)."""
 
     moving: bool = False
     moves: int = 0
@@ -223,6 +243,8 @@ class CameraMotionState:
     episode_start: float = -math.inf
     turn: SceneTurn = field(default_factory=SceneTurn)
     judged_still_since: float = math.inf
+    reference: SceneReference | None = None
+    gap: bool = False
 
     def output(self) -> np.ndarray:
         """``[moving (0/1), moves, accumulated displacement (px)]``."""
@@ -236,7 +258,7 @@ def reference_points(width: int, height: int) -> np.ndarray:
 
 
 def displacement(M: np.ndarray, points: np.ndarray) -> float:
-    """Mean ``||M p - p||`` over ``points`` (K x 2), px; ``M`` is 2 x 3 or 3 x 3."""
+    """Mean ``||M p - p||`` over ``points`` (K x 2), px; ``M`` is 2 x 3 or 3 x 3 (affine)."""
     M = np.asarray(M, float)[:2]
     moved = points @ M[:, :2].T + M[:, 2]
     return float(np.mean(np.linalg.norm(moved - points, axis=1)))
@@ -341,13 +363,16 @@ def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionPa
 
 def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray, joints_moving: np.ndarray,
          params: CameraMotionParams, image_size: tuple[int, int],
-         intrinsics: PinholeIntrinsics | None = None) -> CameraMotionState:  # fmt: skip
+         intrinsics: PinholeIntrinsics | None = None,
+         gray: np.ndarray | None = None) -> CameraMotionState:  # fmt: skip
     """One frame of tracked ``features`` (``optical_flow.TrackedFeatures``: its ``time``, ``ids``,
     ``p_px``, ``flow_px``, and for the turn ``p_CP`` and ``valid``); ``robot``: per feature, a body
     feature or in a body cell; ``joints_moving``: per actuator, it moves now. ``image_size`` is
     (width, height). With ``intrinsics`` (and ``params.turn_frames`` > 0) the views of the still
-    scene and the turn of each move are kept too (module docstring). Returns the new state
-    (``state`` itself for a frame not newer than the last one)."""
+    scene and the turn of each move are kept too (module docstring); with the frame's grey image
+    ``gray`` (H x W uint8) as well, the still scene's reference, checked after a gap
+    (``_checked_against_reference``). Returns the new state (``state`` itself for a frame not
+    newer than the last one)."""
     time = features.time
     if not time > state.last_time:
         return state
@@ -426,11 +451,17 @@ def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray,
         accumulated = displacement(M_episode, points)
         new = replace(new, M_episode=M_episode, accumulated_px=accumulated, rest=0, frames=new.frames + 1)
         if not new.declared and new.frames >= params.min_frames and accumulated >= params.move_px:
-            new = replace(new, declared=True, moves=state.moves + 1)
+            # A move the tracks followed: the reference is of the camera before it.
+            new = replace(new, declared=True, moves=state.moves + 1, reference=None, gap=False)
         return new
+    if not frame.judged and new.reference is not None:
+        # The tracks may miss a move now: the view after starts anew (a view across a move is none).
+        new = replace(new, gap=True, view=SceneView())
     if state.moving:
         rest = state.rest + 1
         new = replace(new, rest=rest, moving=rest < params.rest_frames)
+        if not new.moving and not new.declared and new.reference is not None:
+            new = replace(new, gap=True)  # an episode the tracks lost before it added up
     if (intrinsics is not None and params.turn_frames > 0 and not new.moving and frame.judged
             and frame.displacement_px <= params.view_still_px):
         # After a move, the anchors of the view before that are still tracked count at once: a
@@ -446,4 +477,52 @@ def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray,
                 new = replace(new, turn=scene_turn(new.view_before, new.view, intrinsics, new.moves,
                                                    float(time), new.episode_start))
             new = replace(new, view_before=None)
+        if gray is not None and new.view.frames >= params.turn_frames:
+            # Only the scene still through arm motion: an unflagged arm feature that rested with the
+            # arm would move with it (the anchors while the arm rests include such features).
+            static = anchors & ~robot & static_features(new, ids, params)
+            new = _checked_against_reference(new, gray, ids[static], params, intrinsics)
     return new
+
+
+def _view_points(view: SceneView, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mean pixels and 3-D points of the view's anchors among ``ids`` that were seen in the
+    view's last frame and in at least half of its last ``VIEW_FRAMES`` frames."""
+    keep = (np.isin(view.ids, ids) & (view.last == view.frames)
+            & (2 * view.seen >= min(view.frames, VIEW_FRAMES)))
+    return view.px[keep], view.p_CP[keep]
+
+
+def _checked_against_reference(state: CameraMotionState, gray: np.ndarray, static_ids: np.ndarray,
+                               params: CameraMotionParams,
+                               intrinsics: PinholeIntrinsics) -> CameraMotionState:  # fmt: skip
+    """On a still frame with a still view of ``turn_frames`` frames (``static_ids``: the anchors
+    still through arm motion that are not the robot's): after a gap, the reference's anchors
+    followed into this frame and this frame's anchors back into the reference
+    (``scene_reference.match``); a motion of ``move_px`` or more that both agree on is a camera
+    move the tracks missed, declared now with its turn (its episode starts at the reference's
+    time). An inconclusive match is tried again every ``turn_frames`` frames until the reference
+    is ``MAX_REFERENCE_AGE`` old. Without a gap, the reference is this frame's every
+    ``REFERENCE_INTERVAL`` s."""
+    time, reference = state.last_time, state.reference
+    if not state.gap and reference is not None and time - reference.time < REFERENCE_INTERVAL:
+        return state
+    if state.gap and reference is not None and state.view.frames % max(params.turn_frames, 1):
+        return state
+    px, p_CP = _view_points(state.view, static_ids)
+    if px.shape[0] < MIN_MATCHES:
+        return state  # too few anchors to describe the scene (or to follow into it)
+    current = SceneReference(float(time), gray, px, p_CP)
+    if not state.gap or reference is None:
+        return replace(state, reference=current)
+    found = match(reference, gray, px, p_CP, params.move_px, params.min_inlier_fraction)
+    if found is None:  # not agreed (yet): tried again later, until the reference is too old
+        too_old = time - reference.time > MAX_REFERENCE_AGE
+        return replace(state, reference=current, gap=False) if too_old else state
+    state = replace(state, reference=current, gap=False)
+    if found.moved_px < params.move_px:
+        return state
+    turn = SceneTurn(state.moves + 1, float(time), reference.time, bearings(found.px0, intrinsics), found.q0,
+                     bearings(found.px1, intrinsics), found.q1)
+    return replace(state, moves=state.moves + 1, declared=True, accumulated_px=found.moved_px,
+                   M_episode=found.H, episode_start=reference.time, turn=turn, view_before=None)

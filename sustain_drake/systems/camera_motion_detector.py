@@ -43,6 +43,7 @@ class CameraMotionDetector(LeafSystem):
         - feature_on_body
         - body_feature_cells (optional)
         - actuator_positions
+        - gray_image (optional)
         output_ports:
         - camera_motion
         - accumulated_displacement
@@ -55,7 +56,10 @@ class CameraMotionDetector(LeafSystem):
     ``MotionCoincidenceDetector`` for the same features: a body feature or one in a body cell is
     the robot's), ``body_feature_cells`` (the detector's cells holding a body feature now, size
     ``num_cells``; unconnected: not used), ``actuator_positions`` (rad, size ``num_actuators``: a
-    joint moves when its speed over the last period exceeds ``params.arm_speed``).
+    joint moves when its speed over the last period exceeds ``params.arm_speed``), ``gray_image``
+    (the tracker's ``gray_image``, the frame of ``tracked_features``; with ``camera_info``, the
+    still scene's look is remembered and a move the tracks missed is found by it,
+    ``perception.scene_reference``; unconnected: not).
 
     Outputs: ``camera_motion`` (2, ``[moving, moves]``: 1 while a scene-motion episode lasts, and
     the number of camera moves declared so far; connect to ``CoordinationStateMachine``'s
@@ -95,6 +99,8 @@ class CameraMotionDetector(LeafSystem):
         self._flags = self.DeclareAbstractInputPort("feature_on_body", AbstractValue.Make(FeatureBodyFlags()))
         self._cells = self.DeclareVectorInputPort("body_feature_cells", self._n_c)
         self._q = self.DeclareVectorInputPort("actuator_positions", int(num_actuators))
+        self._gray = self.DeclareAbstractInputPort("gray_image",
+                                                   AbstractValue.Make(np.zeros((0, 0), np.uint8)))
         self._state = self.DeclareAbstractState(AbstractValue.Make(_DetectorState()))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update)
         state = {self.all_state_ticket()}
@@ -129,8 +135,11 @@ class CameraMotionDetector(LeafSystem):
         if self._features.HasValue(context):
             f = self._features.Eval(context)
             robot = self._robot(context, f)
+            gray = self._gray.Eval(context) if self._gray.HasValue(context) else None
+            if gray is not None and np.shape(gray) != (self._size[1], self._size[0]):
+                gray = None  # no frame yet (0 x 0)
             new = replace(new, motion=camera_motion.step(
-                old.motion, f, robot, joints_moving, self._params, self._size, self._intrinsics))
+                old.motion, f, robot, joints_moving, self._params, self._size, self._intrinsics, gray))
         state.get_mutable_abstract_state(self._state).set_value(new)
 
     def _calc_flags(self, context, output) -> None:

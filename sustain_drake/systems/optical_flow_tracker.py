@@ -43,6 +43,7 @@ class OpticalFlowTracker(LeafSystem):
         output_ports:
         - visual_change
         - tracked_features
+        - gray_image
 
     Input ports:
 
@@ -63,6 +64,8 @@ class OpticalFlowTracker(LeafSystem):
     - ``tracked_features``: :class:`~sustain_drake.perception.optical_flow.TrackedFeatures`
       (id, pixel, flow in pixels since the previous frame, ``p_CP`` in metres in the camera
       frame C, ``valid`` for depth, cell index).
+    - ``gray_image``: the last processed frame in grey (``numpy`` H x W uint8; 0 x 0 before the
+      first), the image the tracks were found in; read only.
 
     A track ends when it no longer shows the same surface (``TrackerParams.ncc_min``,
     ``depth_jump_m``: its patch's appearance or its depth changed between frames; see
@@ -99,6 +102,11 @@ class OpticalFlowTracker(LeafSystem):
         self.DeclareAbstractOutputPort(
             "tracked_features", lambda: AbstractValue.Make(TrackedFeatures()),
             self._calc_features, prerequisites_of_calc={self.all_state_ticket()})
+        # The state's own array (a new one every frame, never written to): no copy per frame.
+        self.DeclareAbstractOutputPort(
+            "gray_image", lambda: AbstractValue.Make(np.zeros((0, 0), np.uint8)),
+            lambda context, output: output.set_value(self.tracker_state(context).prev_gray),
+            prerequisites_of_calc={self.all_state_ticket()})  # fmt: skip
 
     @property
     def grid(self) -> CellGrid:

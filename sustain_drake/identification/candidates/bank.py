@@ -109,6 +109,13 @@ class CandidateBank:
     known_corners: frozenset = frozenset()
     moved_from_x: np.ndarray | None = None  # the model a camera move cleared (keep_tool_points)
     moved_at: float = math.nan  # s, when that reset came
+    # s: the reset before the one that cleared that model; a scene turn that starts after it (and by
+    # ``moved_at``) is the turn of that model's camera
+    moved_since: float = -math.inf
+    known_at: float = math.nan  # s: the reset that cleared the model the known points are from
+    # the model the last reset that was not a camera move cleared, should a camera move be declared
+    # before another leader (the tracks lost the move and the observation found it first)
+    cleared: "ClearedModel | None" = None
     turn: object | None = None  # the static scene's turn across that move (``FrameInput.scene_turn``)
     turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
     turned_p_WC: np.ndarray | None = None  # and where the scene's depth puts it (None: not known)
@@ -154,6 +161,19 @@ def pose_at(bank: CandidateBank, time: float, tolerance: float) -> np.ndarray | 
         if dt <= best_dt:
             best, best_dt = X, dt
     return best
+
+
+@dataclass(frozen=True)
+class ClearedModel:
+    """A model a reset cleared: its estimate ``x`` (``pack_x``), its points ``(feature_id, p_HP)``
+    with the ``corners`` among them (``camera_move_recovery.model_points``), the reset before the
+    one that cleared it (``since``, s) and that reset's time (``at``, s)."""
+
+    x: np.ndarray
+    points: tuple
+    corners: frozenset
+    since: float
+    at: float
 
 
 @dataclass(frozen=True)

@@ -35,9 +35,14 @@ from sustain_drake.identification.eye_to_hand_points import (
 
 def with_scene_turn(bank: CandidateBank, scene_turn) -> CandidateBank:
     """The bank holding the static scene's turn (``FrameInput.scene_turn``) of the move that cleared
-    the model, once it has come, with the camera turned as the scene shows."""
+    the model, once it has come, with the camera turned as the scene shows: the turn of a move that
+    started after the reset before the model was cleared (``moved_since``) and by the reset that
+    cleared it. The known points are dropped if the reset they come from came before the move
+    started (another change cleared that model: a slip moves the points)."""
     if (scene_turn is not None and bank.moved_from_x is not None and bank.turn is None and scene_turn.move > 0
-            and scene_turn.start <= bank.moved_at <= scene_turn.time):
+            and bank.moved_since < scene_turn.start <= bank.moved_at):
+        if not bank.known_at >= scene_turn.start:
+            bank = replace(bank, known_points=(), known_corners=frozenset())
         # The turn of the move that cleared the model; the turned camera (at the old position) once,
         # to match new tracks to the known points on every frame until one leads.
         x0 = bank.moved_from_x

@@ -7,7 +7,13 @@ from dataclasses import replace
 import numpy as np
 
 from sustain_drake.identification.candidates.admission import gather
-from sustain_drake.identification.candidates.bank import CandidateBank, mark_verified, pose_at, record_pose
+from sustain_drake.identification.candidates.bank import (
+    CandidateBank,
+    ClearedModel,
+    mark_verified,
+    pose_at,
+    record_pose,
+)
 from sustain_drake.identification.candidates.camera_move_recovery import model_points, with_scene_turn
 from sustain_drake.identification.candidates.fitting import x_is_set
 from sustain_drake.identification.candidates.frame import FrameInput, SeenFrame
@@ -64,28 +70,46 @@ def step(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCrit
 def _after_reset(bank: CandidateBank, params: CandidateParams, frame: FrameInput) -> CandidateBank:
     """A new reset value: every candidate dropped. The adopted model is kept as the previous camera
     (``keep_camera``) unless the camera moved; after a camera move, with ``keep_tool_points``, its
-    points are kept with their ``p_HP`` (``known_points``)."""
+    points are kept with their ``p_HP`` (``known_points``). A camera move declared after another
+    reset cleared the model, with no leader since, is that model's camera move (the tracks lost the
+    move and the observation found it first: ``cleared``)."""
     time, reference_x = frame.time, frame.reference_x
     camera_moved = frame.reset_reason == CAMERA_MOVED
     previous = np.array(reference_x, dtype=float) if x_is_set(reference_x) and not camera_moved else None
     known = () if previous is not None else bank.known_points
     corners = frozenset() if previous is not None else bank.known_corners
+    known_at = math.nan if previous is not None else bank.known_at
     # The camera before a move whose turn has not come yet: the resets that follow while the
     # camera still moves (no leader in between) keep it; one after the turn is a new change.
-    moved_from, moved_at = (bank.moved_from_x, bank.moved_at) if bank.turn is None else (None, math.nan)
-    if camera_moved and params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None:
-        known = model_points(bank, params)  # the model cleared: the camera moved, the tool did not
-        symmetric = {c.feature_id for c in (*bank.candidates, *bank.archive) if c.symmetric}
-        corners = frozenset(i for i, _ in known if i in symmetric)
-        moved_from, moved_at = bank.model_x, float(time)
+    moved = ((bank.moved_from_x, bank.moved_at, bank.moved_since) if bank.turn is None
+             else (None, math.nan, -math.inf))
+    has_model = params.keep_tool_points and bank.leader >= 0 and bank.model_x is not None
+    cleared = None if camera_moved else bank.cleared
+    if camera_moved and has_model:
+        known, corners = model_points(bank, params), None  # the camera moved, the tool did not
+        moved, known_at = (bank.model_x, float(time), bank.reset_time), float(time)
+    elif camera_moved and params.keep_tool_points and bank.leader < 0 and bank.cleared is not None:
+        c = bank.cleared
+        known, corners, moved, known_at = c.points, c.corners, (c.x, float(time), c.since), c.at
     elif previous is not None or bank.leader >= 0:
-        moved_from, moved_at = None, math.nan
+        moved = (None, math.nan, -math.inf)
+        if has_model:
+            points = model_points(bank, params)
+            cleared = ClearedModel(bank.model_x, points, _corners(bank, points), bank.reset_time, float(time))
+    if corners is None:
+        corners = _corners(bank, known)
     return replace(bank, candidates=(), leader=-1, observed=-1, rejected=frozenset(), previous_x=previous,
-                   known_points=known, known_corners=corners, model_x=None, moved_from_x=moved_from,
-                   moved_at=moved_at,
+                   known_points=known, known_corners=corners, known_at=known_at, model_x=None,
+                   moved_from_x=moved[0], moved_at=moved[1], moved_since=moved[2], cleared=cleared,
                    turn=None, turned_R_WC=None, turned_p_WC=None, reset_time=float(time),
                    last_reset=float(frame.reset), round_start=math.nan,
                    observed_last=None, observed_p_HP=None,
                    witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
                    observers=(), refined_solution=None, last_refinement=-math.inf, more_motion=False,
                    held_back=-1)
+
+
+def _corners(bank: CandidateBank, points: tuple) -> frozenset:
+    """The ids among ``points`` of the bank's centrally symmetric candidates (tracked or archived)."""
+    symmetric = {c.feature_id for c in (*bank.candidates, *bank.archive) if c.symmetric}
+    return frozenset(i for i, _ in points if i in symmetric)
