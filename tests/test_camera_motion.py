@@ -260,6 +260,12 @@ def test_the_system_declares_one_move_and_its_context_clones():
     assert detector.GetOutputPort("scene_turn").Eval(clone).move == 0
     with pytest.raises(ValueError, match="camera_info is 640x480"):
         CameraMotionDetector(5, 192, SIZE, camera_info=CameraInfo(640, 480, 580.0, 580.0, 319.5, 239.5))
+    # The grey image: none yet (0 x 0) is no image; one of another size is a clear error.
+    detector.GetInputPort("gray_image").FixValue(context, np.zeros((0, 0), np.uint8))
+    simulator.AdvanceTo(2.1)
+    detector.GetInputPort("gray_image").FixValue(context, np.zeros((10, 10), np.uint8))
+    with pytest.raises(ValueError, match=r"gray_image is \(10, 10\), expected \(240, 320\)"):
+        simulator.AdvanceTo(2.2)
 
 
 def test_features_still_while_the_arm_moves_are_static_scene_not_hand_candidates():

@@ -136,8 +136,11 @@ class CameraMotionDetector(LeafSystem):
             f = self._features.Eval(context)
             robot = self._robot(context, f)
             gray = self._gray.Eval(context) if self._gray.HasValue(context) else None
-            if gray is not None and np.shape(gray) != (self._size[1], self._size[0]):
-                gray = None  # no frame yet (0 x 0)
+            if gray is not None and np.size(gray) == 0:
+                gray = None  # no frame yet
+            elif gray is not None and np.shape(gray) != (self._size[1], self._size[0]):
+                raise ValueError(f"CameraMotionDetector: gray_image is {np.shape(gray)}, expected "
+                                 f"{(self._size[1], self._size[0])} (height, width) uint8")
             new = replace(new, motion=camera_motion.step(
                 old.motion, f, robot, joints_moving, self._params, self._size, self._intrinsics, gray))
         state.get_mutable_abstract_state(self._state).set_value(new)
