@@ -12,6 +12,8 @@ Pure numpy + OpenCV (no pydrake import):
 - :mod:`.charuco`: a ChArUco board's corners, its pose by PnP and from depth points (the
   marker-based baseline).
 - :mod:`.camera_motion`: the camera notices its own motion from the static scene (beyond the paper).
+- :mod:`.scene_reference`: a still frame of the scene, followed into a later frame, finds a move the
+  tracks missed.
 - :mod:`.evaluation`: per-cell ground truth from a label image, metrics, likelihood-map pictures.
 - :mod:`.synthetic`: synthetic per-cell signals for tests and benchmarks.
 """
