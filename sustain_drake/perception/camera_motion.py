@@ -218,9 +218,10 @@ class CameraMotionState:
     or last episode's first moving frame (s); ``turn``: the last move's ``SceneTurn``;
     ``judged_still_since``: since when every frame was judged and still, outside an episode (s; inf
     now: moving, in an episode, or too few anchors to judge), so the camera has not moved since;
-    ``reference``: a still frame of the scene (``scene_reference.SceneReference``, with the grey
-    image only), ``gap``: since it was taken a frame was not judged or an episode ended undeclared, so
-    the tracks may have missed a move (checked against it when the scene is still again)."""
+    ``reference``: a still frame of the scene (``scene_reference.SceneReference``; kept only when
+    ``step`` is given the grey image), ``gap``: since it was taken a frame was not judged or an
+    episode ended undeclared, so the tracks may have missed a move (checked against it when the
+    scene is still again)."""
 
     moving: bool = False
     moves: int = 0
@@ -478,10 +479,7 @@ def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray,
                                                    float(time), new.episode_start))
             new = replace(new, view_before=None)
         if gray is not None and new.view.frames >= params.turn_frames:
-            # Only the scene still through arm motion: an unflagged arm feature that rested with the
-            # arm would move with it (the anchors while the arm rests include such features).
-            static = anchors & ~robot & static_features(new, ids, params)
-            new = _checked_against_reference(new, gray, ids[static], params, intrinsics)
+            new = _checked_against_reference(new, gray, ids, anchors & ~robot, params, intrinsics)
     return new
 
 
@@ -493,11 +491,11 @@ def _view_points(view: SceneView, ids: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return view.px[keep], view.p_CP[keep]
 
 
-def _checked_against_reference(state: CameraMotionState, gray: np.ndarray, static_ids: np.ndarray,
+def _checked_against_reference(state: CameraMotionState, gray: np.ndarray, ids: np.ndarray, scene: np.ndarray,
                                params: CameraMotionParams,
                                intrinsics: PinholeIntrinsics) -> CameraMotionState:  # fmt: skip
-    """On a still frame with a still view of ``turn_frames`` frames (``static_ids``: the anchors
-    still through arm motion that are not the robot's): after a gap, the reference's anchors
+    """On a still frame with a still view of ``turn_frames`` frames (``ids``: this frame's
+    features, ``scene``: per feature, an anchor that is not the robot's): after a gap, the reference's anchors
     followed into this frame and this frame's anchors back into the reference
     (``scene_reference.match``); a motion of ``move_px`` or more that both agree on is a camera
     move the tracks missed, declared now with its turn (its episode starts at the reference's
@@ -509,7 +507,9 @@ def _checked_against_reference(state: CameraMotionState, gray: np.ndarray, stati
         return state
     if state.gap and reference is not None and state.view.frames % max(params.turn_frames, 1):
         return state
-    px, p_CP = _view_points(state.view, static_ids)
+    # Only the scene still through arm motion: an unflagged arm feature that rested with the arm
+    # would move with it (the anchors while the arm rests include such features).
+    px, p_CP = _view_points(state.view, ids[scene & static_features(state, ids, params)])
     if px.shape[0] < MIN_MATCHES:
         return state  # too few anchors to describe the scene (or to follow into it)
     current = SceneReference(float(time), gray, px, p_CP)
