@@ -405,3 +405,40 @@ def test_a_move_while_the_tracks_were_broken_is_found_from_the_still_scenes_imag
     assert on_person > 0.6
     walked, k_walked = run_gap(0, person_step=30)
     assert k_walked is None and walked.moves == 0
+
+
+def run_tracked_pan(shift_px, with_image=True, pan_frames=6):
+    """The arm moving throughout; 40 frames of the wall, then a pan of ``shift_px`` over
+    ``pan_frames`` frames that the tracks follow (the move is declared), and every track ends as
+    the camera comes to rest (the wall after it is tracked anew). Returns the final state."""
+    (g0, px0, p0), (g1, px1, p1) = textured_frames(shift_px)
+    state = CameraMotionState()
+    for k in range(120):
+        if k < 40 + pan_frames:
+            step = min(max(k - 40 + 1, 0), pan_frames)
+            gray, ids, p = (g0 if k < 40 else g1), np.arange(len(px0)), p0
+            px = px0 - [shift_px * step / pan_frames, 0.0]
+            flow = np.tile([-shift_px / pan_frames if 40 <= k else 0.0, 0.0], (len(px0), 1))
+        else:
+            gray, ids, px, p, flow = g1, 1000 + np.arange(len(px1)), px1, p1, np.zeros_like(px1)
+        frame = TrackedFeatures(ids=ids, p_px=px, flow_px=flow, p_CP=p, valid=np.ones(len(ids), bool),
+                                time=k / FPS)
+        state = camera_motion.step(state, frame, np.zeros(len(ids), bool), np.array([True]), PARAMS, SIZE,
+                                   INTRINSICS, gray if with_image else None)
+    return state
+
+
+def test_a_declared_move_whose_tracks_all_ended_takes_its_turn_from_the_still_scenes_image():
+    """The tracks follow a 30 px pan (the move is declared) but all end as the camera comes to rest
+    (a person walks past, a near camera whose view the arm fills): no anchor is tracked across the
+    move, so the still frame before it, matched into the view after, gives the turn (each
+    correspondence the same corner, 30 px over). Without the image there is no turn."""
+    state = run_tracked_pan(30)
+    assert state.moves == 1 and state.turn.move == 1 and len(state.turn) >= 20
+    assert state.turn.start == pytest.approx(40 / FPS) and state.before_move is None
+    pixels = [b[:, :2] / b[:, 2:] * INTRINSICS.fx + [INTRINSICS.cx, INTRINSICS.cy]
+              for b in (state.turn.b0, state.turn.b1)]
+    off = np.linalg.norm(pixels[1] - pixels[0] - [-30.0, 0.0], axis=1)
+    assert np.median(off) < 0.05 and off.max() < PARAMS.inlier_px
+    blind = run_tracked_pan(30, with_image=False)
+    assert blind.moves == 1 and len(blind.turn) == 0

@@ -245,7 +245,7 @@ POINTS = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, 
 
 def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399 * DT, 404 * DT),
                   resets=(400,), ended=None, body_after=True, static_after=None, corners=True,
-                  static_body=False, observation_first=False):  # fmt: skip
+                  static_body=False, observation_first=False, track_life=None):  # fmt: skip
     """Three tool points observed under the true model; at frame 400 the head turns (``TURN`` about
     ``PIVOT_C``: 10 deg, 8 mm) and the state machine resets for the camera's move, the model
     cleared. Every track ends at the turn: the same points come back as new tracks (ids + 100), or
@@ -258,7 +258,8 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
     ``corners``: whether the hand's points are
     centrally symmetric corners (the refiner's first choice; else anchored points);
     ``observation_first``: the first reset is the observation's (the camera move declared at the
-    second). Returns the bank
+    second); ``track_life``: the tracks after the move end every that many frames, the same points
+    found again by new tracks (a person walking past). Returns the bank
     and the frame of the first adoption after the move (None)."""
     X1 = turned(TRUTH.X_WC, TURN)
     bank, rng = CandidateBank(), np.random.default_rng(3)
@@ -267,6 +268,8 @@ def run_head_turn(params, turn_of=None, new_points=None, frames=700, window=(399
         X = hand_pose(k)
         after = k >= 400
         points = (new_points or {i + 100: p for i, p in POINTS.items()}) if after else dict(POINTS)
+        if after and track_life:
+            points = {i + 1000 * ((k - 400) // track_life): p for i, p in points.items()}
         if not after and 100 <= k < 300:
             points.update(ended or {})
         X_WC = X1 if after else TRUTH.X_WC
@@ -469,3 +472,69 @@ def test_after_a_head_turn_points_never_known_place_the_turned_camera_with_their
     assert np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 5e-3
     bank, k_paper = run_head_turn(params, None, new_points=never_known, corners=False)
     assert bank.adoptions[-1].kind.startswith("identified") and k_paper > k + 30
+
+
+def rough_turn(X0, X1):
+    """A turn of 12 anchors with 2 mrad of noise on their bearings after the move and 0.29 deg more
+    than the camera turned (parallax taken for a rotation): its 1 sd is over
+    ``MAX_TURN_ROTATION_SD``."""
+    off = turned(X1, [0.004, -0.003, 0.0], pivot_C=np.zeros(3))
+    turn = scene_turn(X0, off, static_scene(X0, n=12), depth_after=False)
+    b1 = turn.b1 + np.random.default_rng(7).normal(0.0, 2e-3, turn.b1.shape)
+    return replace(turn, b1=b1 / np.linalg.norm(b1, axis=1, keepdims=True))
+
+
+def test_a_turn_too_uncertain_for_its_rotation_still_finds_the_known_points():
+    """A turn from few anchors with noisy bearings (its 1 sd over ``MAX_TURN_ROTATION_SD``, 0.3 deg
+    off: parallax taken for a rotation) is no camera's rotation, but it places the known marks
+    within the window they are looked for in: their new tracks are admitted (no body flag), matched
+    to the known points, and those points' samples alone give the camera (``camera_given_points``)
+    once the camera's 95 % region (the known points fixed) lies within ``camera_accuracy`` (2 mm)
+    and ``camera_rotation_accuracy``; without the turn nothing is admitted."""
+    params = replace(HANDOVER, max_observers=3, keep_tool_points=True, min_rotation_spread=0.05,
+                     turn_admit_known=True, camera_accuracy=0.002, camera_rotation_accuracy=np.radians(0.2))
+    X1 = turned(TRUTH.X_WC, TURN)
+    rough = rough_turn
+    anchors = rough(TRUTH.X_WC, X1)
+    R0, p0 = TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3]
+    assert camera_after_turn(R0, p0, anchors, [], []) is None
+    found = camera_after_turn(R0, p0, anchors, [], [], max_rotation_sd=np.inf)
+    assert rotation_error_deg(found.R_WC, X1[:3, :3]) > 0.2
+    bank, k = run_head_turn(params, rough, body_after=False)
+    adoption = bank.adoptions[-1]
+    assert adoption.kind == "tool points found by the scene turn"
+    assert params.turn_min_samples <= k - 400 + 1 < 200
+    assert np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 2e-3
+    assert rotation_error_deg(adoption.estimate.R_WC, X1[:3, :3]) < 0.2
+    bank, k_none = run_head_turn(params, None, body_after=False, frames=520)
+    assert k_none is None and not bank.candidates
+    # Every track ends after 40 frames (a person walking past): the archived tracks since the move
+    # count with the tracked ones, and a tracked one leads.
+    bank, k_cut = run_head_turn(replace(params, joint=True), rough, body_after=False, track_life=40)
+    adoption = bank.adoptions[-1]
+    assert adoption.kind == "tool points found by the scene turn" and k_cut - 400 < 200
+    assert adoption.feature_id >= 1000 * ((k_cut - 400) // 40)  # a track of that frame
+    assert np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 2e-3
+    assert rotation_error_deg(adoption.estimate.R_WC, X1[:3, :3]) < 0.2
+
+
+def test_after_an_uncertain_turn_points_never_known_give_the_camera_jointly():
+    """A tool without corners and a turn too uncertain for its rotation (``rough_turn``): the camera
+    and each point's ``p_HP`` are fitted jointly (``refine_joint``) to the points since the move,
+    from the turned camera, the archived ones too (every track ends after 40 frames here), once
+    the camera's own 95 % region lies within ``camera_accuracy`` and ``camera_rotation_accuracy``;
+    a point of the static scene taken for the body misfits and is left out."""
+    params = replace(HANDOVER, max_observers=3, keep_tool_points=True, min_rotation_spread=0.05, joint=True,
+                     camera_accuracy=0.002, camera_rotation_accuracy=np.radians(0.2))
+    X1 = turned(TRUTH.X_WC, TURN)
+    never_known = {201: P_TOOL + [0.01, 0.02, 0.0], 202: POINTS[4] + [-0.02, 0.0, 0.01],
+                   203: POINTS[5] + [0.0, 0.015, 0.02]}
+    X = hand_pose(405)
+    static = {900: X[:3, :3] @ P_TOOL + X[:3, 3] + [0.0, 0.006, 0.0]}
+    bank, k = run_head_turn(params, rough_turn, new_points=never_known, corners=False, track_life=40,
+                            static_after=static, static_body=True)
+    adoption = bank.adoptions[-1]
+    assert adoption.kind == "points since the move, near the scene turn" and k - 400 < 200
+    assert adoption.feature_id % 1000 != 900 and adoption.feature_id >= 1000 * ((k - 400) // 40)
+    assert np.linalg.norm(adoption.estimate.p_WC - X1[:3, 3]) < 2e-3
+    assert rotation_error_deg(adoption.estimate.R_WC, X1[:3, :3]) < 0.2

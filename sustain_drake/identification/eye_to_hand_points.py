@@ -338,7 +338,7 @@ def refine_joint_weighted(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndar
 
 
 def joint_covariance(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray,
-                     weights=None) -> np.ndarray | None:  # fmt: skip
+                     weights=None, points_known: bool = False) -> np.ndarray | None:  # fmt: skip
     """Gauss-Newton's covariance ``sigma^2 H^-1`` ((6 + 3K) x (6 + 3K)) of the joint fit of K points'
     raw statistics at the camera ``(R, p_WC)`` and the points ``p_HP`` (K x 3; the fit's optimum), in
     ``(omega, p_WC, p_HP_1, ..., p_HP_K)``: ``omega`` the camera's turn in its own frame (rad; the truth
@@ -346,21 +346,24 @@ def joint_covariance(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, 
     matrix of the weighted statistics and ``sigma^2 = sum_k w_k x_k^T S_k x_k / (3 n - 6 - 3K)``
     (``n`` the samples of all points): with ``refine_joint_weighted``'s weights ``sigma^2`` is about
     1 and each point counts with its own noise; one point with weight 1 gives
-    ``observability.eye_to_hand_covariance``. ``weights``: K positive numbers (None: all 1). None if
-    the fit is undetermined or ``3 n <= 6 + 3K``. IdentificationError unless ``S_list`` is a list of
-    finite 16 x 16 statistics, ``R`` a rotation matrix, ``p_WC`` a finite 3-vector, ``p_HP`` K finite
-    points and ``weights`` None or K finite positive numbers."""
+    ``observability.eye_to_hand_covariance``. ``weights``: K positive numbers (None: all 1).
+    ``points_known``: the ``p_HP`` are given, not fitted (``camera_given_points``): the camera's
+    6 x 6 covariance alone, from its block of ``H``, with ``3 n - 6`` degrees of freedom. None if
+    the fit is undetermined or ``3 n <= 6 + 3K`` (``3 n <= 6``). IdentificationError unless
+    ``S_list`` is a list of finite 16 x 16 statistics, ``R`` a rotation matrix, ``p_WC`` a finite
+    3-vector, ``p_HP`` K finite points and ``weights`` None or K finite positive numbers."""
     S_list = _statistics(S_list)
     K = len(S_list)
     R, p_WC, p_HP = rotation("R", R), real_array("p_WC", p_WC, VECTOR3), _points("p_HP", p_HP, K)
     w = np.ones(K) if weights is None else real_array("weights", weights, (K,), what=f"{K} positive numbers")
     if not np.all(w > 0.0):
         raise IdentificationError(f"weights must be {K} positive numbers, got {describe(weights)}")
-    dof = 3.0 * float(_counts(S_list).sum()) - 6.0 - 3.0 * K
+    dof = 3.0 * float(_counts(S_list).sum()) - 6.0 - (0.0 if points_known else 3.0 * K)
     if not (K > 0 and dof > 0.0):
         return None
     weighted = [wk * S for wk, S in zip(w, S_list, strict=True)]
     H, _ = _joint_normal_equations(weighted, R, p_WC, p_HP)
+    H = H[:6, :6] if points_known else H
     try:
         inverse = np.linalg.inv(H)
     except np.linalg.LinAlgError:

@@ -221,7 +221,9 @@ class CameraMotionState:
     ``reference``: a still frame of the scene (``scene_reference.SceneReference``; kept only when
     ``step`` is given the grey image), ``gap``: since it was taken a frame was not judged or an
     episode ended undeclared, so the tracks may have missed a move (checked against it when the
-    scene is still again)."""
+    scene is still again); ``before_move``: the reference when the tracks declared the current or
+    last move, until its turn is formed (the turn from it where too few anchors were tracked
+    across the move)."""
 
     moving: bool = False
     moves: int = 0
@@ -246,6 +248,7 @@ class CameraMotionState:
     judged_still_since: float = math.inf
     reference: SceneReference | None = None
     gap: bool = False
+    before_move: SceneReference | None = None
 
     def output(self) -> np.ndarray:
         """``[moving (0/1), moves, accumulated displacement (px)]``."""
@@ -453,7 +456,8 @@ def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray,
         new = replace(new, M_episode=M_episode, accumulated_px=accumulated, rest=0, frames=new.frames + 1)
         if not new.declared and new.frames >= params.min_frames and accumulated >= params.move_px:
             # A move the tracks followed: the reference is of the camera before it.
-            new = replace(new, declared=True, moves=state.moves + 1, reference=None, gap=False)
+            new = replace(new, declared=True, moves=state.moves + 1, reference=None, gap=False,
+                          before_move=state.reference)
         return new
     if not frame.judged and new.reference is not None:
         # The tracks may miss a move now: the view after starts anew (a view across a move is none).
@@ -473,14 +477,46 @@ def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray,
             members = anchors | (np.isin(ids, new.view_before.ids) & finite & ~robot)
         new = replace(new, view=add_to_view(new.view, ids[members], p_px[members], p_CP[members],
                                             valid[members]))
-        if new.view_before is not None and new.view.frames >= params.turn_frames:
+        formed = new.view.frames >= params.turn_frames
+        if formed and (new.view_before is not None or new.before_move is not None):
             if new.declared:  # a camera move (not a glitch): its turn
-                new = replace(new, turn=scene_turn(new.view_before, new.view, intrinsics, new.moves,
-                                                   float(time), new.episode_start))
-            new = replace(new, view_before=None)
+                new = replace(new, turn=_turn_of_move(new, gray, ids, anchors & ~robot, params, intrinsics))
+            new = replace(new, view_before=None, before_move=None)
         if gray is not None and new.view.frames >= params.turn_frames:
             new = _checked_against_reference(new, gray, ids, anchors & ~robot, params, intrinsics)
     return new
+
+
+def _turn_of_move(state: CameraMotionState, gray, ids: np.ndarray, scene: np.ndarray,
+                  params: CameraMotionParams, intrinsics: PinholeIntrinsics) -> SceneTurn:  # fmt: skip
+    """The turn of the declared move once the view after it is formed: the anchors tracked across
+    it (``scene_turn``), or, where fewer than ``MIN_MATCHES`` were (a near camera: the arm and a
+    person fill the view; a turn that ends every track), the still frame before it
+    (``before_move``) matched into this one (``scene_reference.match``); the last turn if neither
+    gives one."""
+    tracked = (None if state.view_before is None else
+               scene_turn(state.view_before, state.view, intrinsics, state.moves, state.last_time,
+                          state.episode_start))
+    if (tracked is None or len(tracked) < MIN_MATCHES) and gray is not None and state.before_move is not None:
+        px, p_CP = _scene_points(state, ids, scene, params)
+        found = (None if px.shape[0] < MIN_MATCHES else
+                 match(state.before_move, gray, px, p_CP, params.move_px, params.min_inlier_fraction))
+        if found is not None:
+            return _matched_turn(found, state.moves, state.last_time, state.episode_start, intrinsics)
+    return state.turn if tracked is None else tracked
+
+
+def _matched_turn(found, move: int, time: float, start: float, intrinsics: PinholeIntrinsics) -> SceneTurn:
+    """The ``SceneTurn`` of a reference matched into a frame (``scene_reference.ReferenceMatch``)."""
+    return SceneTurn(move, float(time), float(start), bearings(found.px0, intrinsics), found.q0,
+                     bearings(found.px1, intrinsics), found.q1)
+
+
+def _scene_points(state: CameraMotionState, ids: np.ndarray, scene: np.ndarray, params: CameraMotionParams):
+    """The view's mean pixels and points of the anchors (``scene``: per feature, an anchor not of the
+    robot) still through arm motion (``static_features``): an unflagged arm feature that rested
+    with the arm would move with it (the anchors while the arm rests include such features)."""
+    return _view_points(state.view, ids[scene & static_features(state, ids, params)])
 
 
 def _view_points(view: SceneView, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -507,9 +543,7 @@ def _checked_against_reference(state: CameraMotionState, gray: np.ndarray, ids: 
         return state
     if state.gap and reference is not None and state.view.frames % max(params.turn_frames, 1):
         return state
-    # Only the scene still through arm motion: an unflagged arm feature that rested with the arm
-    # would move with it (the anchors while the arm rests include such features).
-    px, p_CP = _view_points(state.view, ids[scene & static_features(state, ids, params)])
+    px, p_CP = _scene_points(state, ids, scene, params)
     if px.shape[0] < MIN_MATCHES:
         return state  # too few anchors to describe the scene (or to follow into it)
     current = SceneReference(float(time), gray, px, p_CP)
@@ -522,7 +556,6 @@ def _checked_against_reference(state: CameraMotionState, gray: np.ndarray, ids: 
     state = replace(state, reference=current, gap=False)
     if found.moved_px < params.move_px:
         return state
-    turn = SceneTurn(state.moves + 1, float(time), reference.time, bearings(found.px0, intrinsics), found.q0,
-                     bearings(found.px1, intrinsics), found.q1)
+    turn = _matched_turn(found, state.moves + 1, float(time), reference.time, intrinsics)
     return replace(state, moves=state.moves + 1, declared=True, accumulated_px=found.moved_px,
                    M_episode=found.H, episode_start=reference.time, turn=turn, view_before=None)

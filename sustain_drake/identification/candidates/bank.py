@@ -118,6 +118,9 @@ class CandidateBank:
     cleared: "ClearedModel | None" = None
     turn: object | None = None  # the static scene's turn across that move (``FrameInput.scene_turn``)
     turned_R_WC: np.ndarray | None = None  # that camera turned as the scene shows (None: too few anchors)
+    # rad: the turn's 1 sd (``CameraAfterTurn.rotation_sd``); over ``MAX_TURN_ROTATION_SD`` the turned
+    # camera only finds the known points again, and they give the camera's rotation themselves
+    turn_rotation_sd: float = math.inf
     turned_p_WC: np.ndarray | None = None  # and where the scene's depth puts it (None: not known)
     reset_time: float = -math.inf  # s, when the last reset came
     more_motion: bool = False  # a leader was held back (lever or spread), none leads, one converged

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from sustain_drake.identification.camera_turn import TurnAnchors, camera_after_turn
+from sustain_drake.identification.camera_turn import MAX_TURN_ROTATION_SD, TurnAnchors, camera_after_turn
 from sustain_drake.identification.candidates.bank import Adoption, CandidateBank, with_camera
 from sustain_drake.identification.candidates.fitting import (
     FIRST_CHOICE_POINTS,
@@ -28,7 +28,10 @@ from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.identification.eye_to_hand import pack_x
 from sustain_drake.identification.eye_to_hand_points import (
     camera_given_points,
+    joint_covariance,
+    points_given_camera,
     position_and_points_given_rotation,
+    refine_joint,
     spread_off_line,
 )
 
@@ -44,12 +47,29 @@ def with_scene_turn(bank: CandidateBank, scene_turn) -> CandidateBank:
         if not bank.known_at >= scene_turn.start:
             bank = replace(bank, known_points=(), known_corners=frozenset())
         # The turn of the move that cleared the model; the turned camera (at the old position) once,
-        # to match new tracks to the known points on every frame until one leads.
+        # to match new tracks to the known points on every frame until one leads; a turn less
+        # certain than MAX_TURN_ROTATION_SD only finds them.
         x0 = bank.moved_from_x
-        turned = camera_after_turn(x0[0:9].reshape(3, 3, order="F"), x0[9:12], scene_turn, [], [])
+        turned = camera_after_turn(x0[0:9].reshape(3, 3, order="F"), x0[9:12], scene_turn, [], [],
+                                   max_rotation_sd=math.inf)
         bank = replace(bank, turn=scene_turn, turned_R_WC=None if turned is None else turned.R_WC,
-                       turned_p_WC=turned.p_WC if turned is not None and turned.scene_shift else None)
+                       turned_p_WC=turned.p_WC if turned is not None and turned.scene_shift else None,
+                       turn_rotation_sd=math.inf if turned is None else turned.rotation_sd)
     return bank
+
+
+def _turn_is_precise(bank: CandidateBank) -> bool:
+    """Whether the turn's 1 sd is within ``MAX_TURN_ROTATION_SD``: the turned camera's rotation is then
+    the adopted camera's; otherwise the turned camera only finds the known points again."""
+    return bank.turn_rotation_sd <= MAX_TURN_ROTATION_SD
+
+
+def _turn_finds(bank: CandidateBank, params: CandidateParams, p_CQ: np.ndarray) -> bool:
+    """Whether the turned camera can find points at ``p_CQ`` (K x 3, in the camera frame): 3 sd of the
+    turn move the farthest of them by at most the window they are looked for in (``_turn_window``)."""
+    _, window = _turn_window(bank, params)
+    depth = float(np.max(np.linalg.norm(p_CQ, axis=1), initial=0.0))
+    return 3.0 * bank.turn_rotation_sd * depth <= window
 
 
 def recover(bank: CandidateBank, params: CandidateParams, seen: SeenFrame, pool: Pool) -> Pool:
@@ -61,21 +81,28 @@ def recover(bank: CandidateBank, params: CandidateParams, seen: SeenFrame, pool:
     # turned with the camera.
     found, kind = None, "scene turn, tool points kept"
     if bank.turn is not None:
-        found = _camera_from_turn(kept, bank, params)
+        found = _camera_from_turn(kept, pool.archive, bank, params)
     if found is None:
         kind = "previous tool points"
         found = _camera_from_known_points(kept, dict(bank.known_points), params, bank.adopted_mse)
     if found is None and bank.turned_R_WC is not None:
-        kind = "scene turn, points since the move"
-        found = _camera_from_turn_and_new_points(kept, bank, params)
+        precise = _turn_is_precise(bank)
+        kind = ("scene turn, points since the move" if precise
+                else "points since the move, near the scene turn")
+        found = (_camera_from_turn_and_new_points(kept, bank, params) if precise
+                 else _camera_near_turn_from_new_points(kept, pool.archive, bank, params))
     if found is None:
         return pool
     x, mse, leader = found
+    if kind == "scene turn, tool points kept" and not _turn_is_precise(bank):
+        kind = "tool points found by the scene turn"
     best = next(c for c in kept if c.feature_id == leader)
     expected = min(mse, bank.adopted_mse) if params.keep_allowable_error else mse
-    verdict = ("converged: the camera turned as the scene shows, placed by the points since the move"
-               if kind == "scene turn, points since the move"
-               else "converged: the tool points kept, the camera re-identified")
+    verdict = {"scene turn, points since the move":
+               "converged: the camera turned as the scene shows, placed by the points since the move",
+               "points since the move, near the scene turn":
+               "converged: the camera re-identified jointly from the points since the move"}.get(
+        kind, "converged: the tool points kept, the camera re-identified")
     best = with_camera(best, x, x[12:15].copy(), expected, verdict)
     kept = [best if c.feature_id == leader else c for c in kept]
     adoptions = pool.adoptions + (Adoption(float(seen.time), leader, best.statistic.copy(),
@@ -127,10 +154,14 @@ def _fit_dropping_misfits(pairs: list, solve, limit: float):
     return None
 
 
-def _leading(pairs: list, errors: list, found, anchor: np.ndarray):
+def _leading(pairs: list, errors: list, found, anchor: np.ndarray, tracked: set | None = None):
     """``(x, mse, feature_id)`` of the fitted point nearest the adopted tool point ``anchor`` in H,
-    with the fitted camera."""
-    k = min(range(len(pairs)), key=lambda i: float(np.linalg.norm(pairs[i][1] - anchor)))
+    with the fitted camera, among the candidates whose ids are in ``tracked`` (None: all); None if
+    none is."""
+    among = [i for i in range(len(pairs)) if tracked is None or pairs[i][0].feature_id in tracked]
+    if not among:
+        return None
+    k = min(among, key=lambda i: float(np.linalg.norm(pairs[i][1] - anchor)))
     return pack_x(found[0], found[1], pairs[k][1]), errors[k], pairs[k][0].feature_id
 
 
@@ -151,22 +182,31 @@ def _camera_from_known_points(kept, known: dict, params: CandidateParams, adopte
     return _leading(fit[1], fit[2], fit[0], next(iter(known.values())))
 
 
-def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
+def _camera_from_turn(kept, archive, bank: CandidateBank, params: CandidateParams):
     """``keep_tool_points`` with the scene's turn: the camera that the move left turned as the
     static scene shows and placed where the known points' samples since the move put it
     (``camera_after_turn``). The points: candidates with ``turn_min_samples`` samples that are a
     known point, by id (tracked through the move) or by ``p_HP`` (``turn_radius``, see
     ``CandidateParams``), fitted with ``_fit_dropping_misfits``. Returns ``(x, mse, feature_id)``
     as ``_camera_from_known_points`` or None. With the scene's shift (``turned_p_WC``), the tracks
-    are matched under the camera there, within ``turn_scene_shift``, one new track sufficing."""
+    are matched under the camera there, within ``turn_scene_shift``, one new track sufficing.
+    A turn less certain than ``MAX_TURN_ROTATION_SD`` only matches the tracks, the archived ones
+    since the move too (a person walking past ends every track within seconds): the camera is then
+    the one the matched points' samples give alone (``camera_given_points``), within the turned
+    camera's window, with its 95 % region within ``camera_accuracy`` and
+    ``camera_rotation_accuracy`` (which measures how well the views pin its rotation, as
+    ``min_point_spread`` does where there is no such gate); a tracked one of them leads."""
     if bank.turned_R_WC is None:
         return None  # too few anchors in the turn
     known = dict(bank.known_points)
     x0, turn, R_turned = bank.moved_from_x, bank.turn, bank.turned_R_WC
     R_WC0, p_WC0 = x0[0:9].reshape(3, 3, order="F"), x0[9:12]
-    shifted = bank.turned_p_WC is not None
+    shifted, precise = bank.turned_p_WC is not None, _turn_is_precise(bank)
     p_turned, window = _turn_window(bank, params)
-    ready = [c for c in kept if c.solution.num_samples >= params.turn_min_samples]
+    pool = kept if precise else [*kept, *archive]
+    ready = [c for c in pool if c.solution.num_samples >= params.turn_min_samples]
+    if not precise and not _turn_finds(bank, params, np.array([c.last_p_CP for c in ready]).reshape(-1, 3)):
+        return None
     pairs = [(c, known[c.feature_id]) for c in ready if c.feature_id in known]
     # A new track (the turn ended the old one) on a known corner is that corner seen from the
     # turned camera at the old position: off by the camera's unknown shift, the same for every
@@ -187,9 +227,17 @@ def _camera_from_turn(kept, bank: CandidateBank, params: CandidateParams):
             others = distance[np.linalg.norm(known_p - known_p[j], axis=1) > params.turn_radius]
             if distance[j] <= params.turn_radius and not np.any(others <= 2.0 * params.turn_radius):
                 pairs.append((c, known_p[j]))
+    limit = params.observe_consistency**2 * bank.adopted_mse
+    if not precise:
+        fit = _fit_dropping_misfits(pairs, lambda ps: camera_given_points(
+            [S_of(c.statistic) for c, _ in ps], np.array([p for _, p in ps])), limit)  # fmt: skip
+        if fit is None or not (np.linalg.norm(fit[0][1] - p_turned) <= window
+                               and _within_accuracy_given_points(fit[1], fit[0], params)):
+            return None
+        return _leading(fit[1], fit[2], fit[0], next(iter(known.values())), {c.feature_id for c in kept})
     fit = _fit_dropping_misfits(pairs, lambda ps: camera_after_turn(
         R_WC0, p_WC0, TurnAnchors(turn.b0, turn.q0, turn.b1), [S_of(c.statistic) for c, _ in ps],
-        np.array([p for _, p in ps])), params.observe_consistency**2 * bank.adopted_mse)  # fmt: skip
+        np.array([p for _, p in ps])), limit)  # fmt: skip
     if fit is None:
         return None
     if not shifted and not tracked and _on_a_line([p for _, p in fit[1]], params.turn_radius):
@@ -233,6 +281,61 @@ def _camera_from_turn_and_new_points(kept, bank: CandidateBank, params: Candidat
             points[k].feature_id)
 
 
+def _camera_near_turn_from_new_points(kept, archive, bank: CandidateBank, params: CandidateParams):
+    """A turn less certain than ``MAX_TURN_ROTATION_SD``: the camera and a ``p_HP`` per point fitted
+    jointly (``refine_joint``, 6 + 3K unknowns) to the points tracked since the move, the archived
+    ones too (a person walking past ends every track within seconds), from the turned camera
+    (``_turn_window``'s position): candidates with ``joint_min_samples`` samples over
+    ``min_rotation_spread``, at least ``FIRST_CHOICE_POINTS``, misfits left out as in
+    ``_camera_from_turn_and_new_points``. The camera must lie within the turned camera's window
+    and its 95 % region (``joint_covariance``, each ``p_HP`` free) within ``camera_accuracy`` and
+    ``camera_rotation_accuracy``. Returns ``(x, mse, feature_id)`` (the tracked point with the
+    most samples) or None."""
+    points = [c for c in [*kept, *archive] if c.solution.num_samples >= params.joint_min_samples
+              and rotation_spread(c.statistic) >= params.min_rotation_spread]
+    p_turned, window = _turn_window(bank, params)
+    total, limit = len(points), params.observe_consistency**2 * bank.adopted_mse
+    while len(points) >= FIRST_CHOICE_POINTS and 2 * len(points) > total:
+        S_list = [S_of(c.statistic) for c in points]
+        start = points_given_camera(S_list, bank.turned_R_WC, p_turned)
+        fit = refine_joint(S_list, bank.turned_R_WC, p_turned, start)
+        if fit is None:
+            return None
+        errors = [mean_squared_error_of(c.statistic, pack_x(fit[0], fit[1], p))
+                  for c, p in zip(points, fit[2], strict=True)]
+        worst = int(np.argmax(errors))
+        if errors[worst] <= limit:
+            break
+        points = points[:worst] + points[worst + 1:]
+    else:
+        return None
+    R_WC, p_WC, P = fit
+    covariance = joint_covariance(S_list, R_WC, p_WC, P)
+    ids = {c.feature_id for c in kept}
+    tracked = [k for k in range(len(points)) if points[k].feature_id in ids]
+    if covariance is None or not tracked or not np.linalg.norm(p_WC - p_turned) <= window:
+        return None
+    d = np.diagonal(covariance)
+    if not (REGION_95 * math.sqrt(float(d[3:6].sum())) <= params.camera_accuracy
+            and REGION_95 * math.sqrt(float(d[0:3].sum())) <= params.camera_rotation_accuracy):
+        return None
+    k = max(tracked, key=lambda i: points[i].solution.num_samples)
+    return pack_x(R_WC, p_WC, P[k]), float(errors[k]), points[k].feature_id
+
+
+def _within_accuracy_given_points(pairs: list, found, params: CandidateParams) -> bool:
+    """Whether the 95 % region of the camera ``found`` (``R_WC, p_WC, ...``) that ``pairs``
+    (``(candidate, p_HP)``) give with their ``p_HP`` fixed lies within ``camera_accuracy`` and
+    ``camera_rotation_accuracy`` (``joint_covariance`` with ``points_known``)."""
+    covariance = joint_covariance([S_of(c.statistic) for c, _ in pairs], found[0], found[1],
+                                  np.array([p for _, p in pairs]), points_known=True)
+    if covariance is None:
+        return False
+    d = np.diagonal(covariance)
+    return (REGION_95 * math.sqrt(float(d[3:6].sum())) <= params.camera_accuracy
+            and REGION_95 * math.sqrt(float(d[0:3].sum())) <= params.camera_rotation_accuracy)
+
+
 def _turn_window(bank: CandidateBank, params: CandidateParams) -> tuple[np.ndarray, float]:
     """Where the turned camera is taken to be and how far off that may be (m): at the shift the
     scene's depth gave, within ``turn_scene_shift``, else at the old position, within
@@ -258,6 +361,8 @@ def near_known_points(bank: CandidateBank, params: CandidateParams, X_WH: np.nda
         return near
     p_WC, window = _turn_window(bank, params)
     p_CQ = points_in_camera(bank.turned_R_WC, p_WC, np.array(corners), X_WH)
+    if not _turn_finds(bank, params, p_CQ):
+        return near
     distance = np.linalg.norm(p_CP[usable][:, None, :] - p_CQ[None, :, :], axis=2).min(axis=1)
     near[usable] = distance <= window + params.turn_radius
     return near

@@ -58,10 +58,11 @@ def choose(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCr
     # the statistics, and so its lever, are as they were.
     converged = ([] if pool.leader >= 0 or (bank.held_back >= 0 and not pool.fed and not adopt_held)
                  else [c for c in pool.kept if c.solution.verdict.converged])
-    # Precise points first: while a centrally symmetric point is a candidate, only such a point
-    # leads. A point anchored on its patch (a second choice) carries a view-dependent bias of a
-    # tenth of a pixel or more on fine print, which the fit's noise cannot show.
-    if any(c.symmetric for c in pool.kept):
+    # Precise points first: while a centrally symmetric point is a candidate that converges in time,
+    # only such a point leads. A point anchored on its patch (a second choice) carries a
+    # view-dependent bias of a tenth of a pixel or more on fine print, which the fit's noise cannot
+    # show.
+    if any(c.symmetric for c in converged) or _corner_in_time(converged, pool.kept, seen.time):
         converged = [c for c in converged if c.symmetric]
     forgetting_factor = seen.given.forgetting_factor
     if converged:
@@ -94,6 +95,22 @@ def choose(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCr
     held_id = (best.feature_id if held_back
                else bank.held_back if pool.leader < 0 and held is not None and not unseen else -1)
     return pool, more_motion, held_id
+
+
+def _corner_in_time(converged: list, kept: list, time: float) -> bool:
+    """Whether a centrally symmetric candidate, sampled as it has been since its admission, gathers
+    as many samples as the fastest-sampled converged candidate has within the time that one took
+    (so it converges about as soon again). A corner seen only at a few poses (a sticker's print on
+    a wooden handle: 6 samples a second against 30) would hold the converged points back for tens
+    of seconds; one sampled like them is worth waiting for."""
+    def age(c: Candidate) -> float:
+        return max(time - c.admitted, 1e-9)
+
+    if not converged:
+        return False
+    fastest = max(converged, key=lambda c: c.solution.num_samples / age(c))
+    return any(c.symmetric and fastest.solution.num_samples - c.solution.num_samples
+               <= c.solution.num_samples / age(c) * age(fastest) for c in kept)
 
 
 def _adopt(best: Candidate, params: CandidateParams, seen: SeenFrame, pool: Pool,
