@@ -40,7 +40,8 @@ class Adoption:
     estimate, and how it was identified (``"identified"``: all 16 unknowns, the paper's verdict;
     ``"previous camera"``: the camera of the model abandoned at the last reset explains the
     candidate's samples, only its ``p_HP`` is new; after a camera move ``"scene turn, tool points
-    kept"``, ``"previous tool points"`` and ``"scene turn, points since the move"``, see
+    kept"``, ``"tool points found by the scene turn"``, ``"previous tool points"``, ``"scene turn,
+    points since the move"`` and ``"points since the move, near the scene turn"``, see
     ``camera_move_recovery``)."""
 
     time: float

@@ -4,7 +4,8 @@ camera in closed form (``keep_tool_points``: 6 unknowns, not 15), and with the s
 the move, the camera is the old one turned, placed by the tool points. Where none of those points is
 found again (a tool without corners: its anchored points are wherever their tracks began), the turned
 camera is placed by the points tracked since the move, each with a ``p_HP`` of its own (3 + 3K
-unknowns)."""
+unknowns). A turn too uncertain for the camera's rotation only finds the points: the known ones then
+give the camera alone (6 unknowns), the others jointly with it (6 + 3K)."""
 
 import math
 from dataclasses import replace
@@ -313,11 +314,7 @@ def _camera_near_turn_from_new_points(kept, archive, bank: CandidateBank, params
     covariance = joint_covariance(S_list, R_WC, p_WC, P)
     ids = {c.feature_id for c in kept}
     tracked = [k for k in range(len(points)) if points[k].feature_id in ids]
-    if covariance is None or not tracked or not np.linalg.norm(p_WC - p_turned) <= window:
-        return None
-    d = np.diagonal(covariance)
-    if not (REGION_95 * math.sqrt(float(d[3:6].sum())) <= params.camera_accuracy
-            and REGION_95 * math.sqrt(float(d[0:3].sum())) <= params.camera_rotation_accuracy):
+    if not (tracked and np.linalg.norm(p_WC - p_turned) <= window and _within_targets(covariance, params)):
         return None
     k = max(tracked, key=lambda i: points[i].solution.num_samples)
     return pack_x(R_WC, p_WC, P[k]), float(errors[k]), points[k].feature_id
@@ -327,8 +324,13 @@ def _within_accuracy_given_points(pairs: list, found, params: CandidateParams) -
     """Whether the 95 % region of the camera ``found`` (``R_WC, p_WC, ...``) that ``pairs``
     (``(candidate, p_HP)``) give with their ``p_HP`` fixed lies within ``camera_accuracy`` and
     ``camera_rotation_accuracy`` (``joint_covariance`` with ``points_known``)."""
-    covariance = joint_covariance([S_of(c.statistic) for c, _ in pairs], found[0], found[1],
-                                  np.array([p for _, p in pairs]), points_known=True)
+    return _within_targets(joint_covariance([S_of(c.statistic) for c, _ in pairs], found[0], found[1],
+                                            np.array([p for _, p in pairs]), points_known=True), params)
+
+
+def _within_targets(covariance: np.ndarray | None, params: CandidateParams) -> bool:
+    """Whether the 95 % region of a camera with ``covariance`` (its first 6 x 6 block: turn, rad, then
+    position, m; None: undetermined) lies within ``camera_accuracy`` and ``camera_rotation_accuracy``."""
     if covariance is None:
         return False
     d = np.diagonal(covariance)
