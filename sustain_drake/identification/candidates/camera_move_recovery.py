@@ -90,8 +90,10 @@ def recover(bank: CandidateBank, params: CandidateParams, seen: SeenFrame, pool:
         precise = _turn_is_precise(bank)
         kind = ("scene turn, points since the move" if precise
                 else "points since the move, near the scene turn")
+        # The joint fit (a few ms) only when a sample came: else the statistics are as they were.
         found = (_camera_from_turn_and_new_points(kept, bank, params) if precise
-                 else _camera_near_turn_from_new_points(kept, pool.archive, bank, params))
+                 else _camera_near_turn_from_new_points(kept, pool.archive, bank, params) if pool.fed
+                 else None)
     if found is None:
         return pool
     x, mse, leader = found
