@@ -42,7 +42,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 from bench_hand_eye_candidates import run  # noqa: E402  (bench/bench_hand_eye_candidates.py)
 
 from sustain_drake.files import write_atomically  # noqa: E402
-from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, refine_joint  # noqa: E402
+from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier  # noqa: E402
+from sustain_drake.identification.eye_to_hand_points import refine_joint  # noqa: E402
 from sustain_drake.identification.rotation import rotation_angle  # noqa: E402
 from sustain_drake.loops.hand_eye import hand_eye_parts  # noqa: E402
 from sustain_drake.station import load_scenario  # noqa: E402

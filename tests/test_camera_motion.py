@@ -136,6 +136,28 @@ def test_the_person_alone_the_robot_alone_or_a_few_outliers_never_move_the_camer
     assert out[:, 1].max() == 0 and out[:, 0].max() == 0
 
 
+def test_a_person_who_stood_and_walks_on_is_no_camera_move_however_many_their_features():
+    # The person stands 2 s while the arm moves (their features become anchors: still against the
+    # scene through the arm's motion), outnumbering the scene's 30 anchors, then walks on
+    # slowly (1.2 px per frame, under inlier_px: the scene's anchors are inliers of the person's
+    # per-frame motion too, and the person's drift from their still pixels is the consensus).
+    scene = Scene(seed=11, background=30, person=50, robot=10)
+
+    def person_walks_on(k):
+        return {"person": shift([1.2, 0.3])} if k >= 60 else {}
+
+    state, out = run(scene, 150, person_walks_on, lambda k: True)
+    assert out[:, 1].max() == 0 and state.moves == 0
+    # A camera pan at the same pace while the person stands moves every anchor: one move.
+    scene = Scene(seed=11, background=30, person=50, robot=10)
+
+    def camera_pans(k):
+        return {"background": shift([1.2, 0.3]), "person": shift([1.2, 0.3])} if k >= 60 else {}
+
+    state, out = run(scene, 150, camera_pans, lambda k: True)
+    assert state.moves == 1
+
+
 def test_unflagged_arm_features_that_rested_do_not_become_the_scene_when_the_arm_moves_again():
     # A near camera: the arm (its features not flagged by the body detector) fills most of the
     # image, 60 features against 25 of the background. The arm moves, rests 1 s, moves again: its

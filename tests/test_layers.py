@@ -106,6 +106,23 @@ def test_benches_use_no_command_line_code():
         assert not any(m.startswith("sustain_drake.cli") for m in found), path
 
 
+
+def test_benches_import_names_the_package_has():
+    """Every name a bench imports from the package exists (a bench is run by hand, rarely: a moved
+    function must not break it unnoticed)."""
+    import importlib
+
+    missing = []
+    for path in sorted((ROOT / "bench").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sustain_drake"):
+                module = importlib.import_module(node.module)
+                missing += [f"{path.name}: {node.module}.{a.name}" for a in node.names
+                            if not hasattr(module, a.name)
+                            and not (hasattr(module, "__path__")  # a package's submodule
+                                     and importlib.util.find_spec(f"{node.module}.{a.name}"))]
+    assert missing == []
+
 @pytest.mark.parametrize("package", MATH)
 def test_the_math_imports_without_pydrake(package):
     """The paper's equations run with numpy, scipy and OpenCV alone: importing every math module

@@ -21,10 +21,13 @@ body's features and a walking person a minority of them. So, per frame:
   fitted by RANSAC (``cv2.estimateAffinePartial2D``) from the anchors' previous pixels
   (``p_px - flow_px``) to their current ones;
 - the frame *moves* when at least ``min_background`` anchors exist, at least
-  ``min_inlier_fraction`` of them are inliers of that motion (within ``inlier_px``) and its
-  displacement (below) exceeds ``still_px``. The arm or a person starting to move over a still
-  background leaves the still anchors as the consensus (displacement 0); fewer anchors than
-  ``min_background`` say nothing (the frame is not judged moving).
+  ``min_inlier_fraction`` of them are inliers of that motion (within ``inlier_px``), its
+  displacement (below) exceeds ``still_px``, and fewer than ``min_background`` anchors are explained
+  better by staying put than by that motion (a camera move moves every anchor). The arm or a person starting to move
+  over a still background leaves the still anchors as the consensus (displacement 0); a person who
+  stood long enough for their features to be anchors and outnumbers the scene's, walking on, leaves
+  the scene's anchors still; fewer anchors than ``min_background`` say
+  nothing (the frame is not judged moving).
   A slow move (a head's ramp, a fraction of a pixel per frame at first, or a creep) is seen by
   its sum: when the anchors, fitted from their still pixels (where each came to rest, or where the
   last moving frame left it) to where they are now, moved together by more than ``still_px``, the
@@ -361,7 +364,15 @@ def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionPa
         return FrameMotion(True, False, still, n, 0.0, 0.0)
     fraction = float(np.count_nonzero(inliers)) / n
     moved = displacement(M, points)
-    moving = fraction >= params.min_inlier_fraction and moved > params.still_px
+    # A camera move moves every anchor as the fitted motion does: anchors enough to judge a frame by
+    # themselves that staying put explains better than the motion (by more than the still scene's
+    # own per-frame motion, view_still_px) are the scene, and the motion is of a body in front of it
+    # (a person who stood long enough for their features to be anchors, walking on: a similarity
+    # fits a compact group's shift and the still anchors around it within inlier_px).
+    stayed = (np.linalg.norm(cur_px - (prev_px @ M[:, :2].T + M[:, 2]), axis=1)
+              - np.linalg.norm(cur_px - prev_px, axis=1)) > params.view_still_px
+    moving = (fraction >= params.min_inlier_fraction and moved > params.still_px
+              and np.count_nonzero(stayed) < params.min_background)
     return FrameMotion(True, moving, M, n, fraction, moved)
 
 
