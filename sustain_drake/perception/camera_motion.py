@@ -22,12 +22,12 @@ body's features and a walking person a minority of them. So, per frame:
   (``p_px - flow_px``) to their current ones;
 - the frame *moves* when at least ``min_background`` anchors exist, at least
   ``min_inlier_fraction`` of them are inliers of that motion (within ``inlier_px``), its
-  displacement (below) exceeds ``still_px``, and fewer than ``min_background`` anchors are explained
-  better by staying put than by that motion (a camera move moves every anchor). The arm or a person starting to move
-  over a still background leaves the still anchors as the consensus (displacement 0); a person who
-  stood long enough for their features to be anchors and outnumbers the scene's, walking on, leaves
-  the scene's anchors still; fewer anchors than ``min_background`` say
-  nothing (the frame is not judged moving).
+  displacement (below) exceeds ``still_px``, and fewer than ``min_background`` anchors are
+  explained better by staying put than by that motion (a camera move moves every anchor). The arm
+  or a person starting to move over a still background leaves the still anchors as the consensus
+  (displacement 0); a person who stood long enough for their features to be anchors and
+  outnumbers the scene's, walking on, leaves the scene's anchors still; fewer anchors than
+  ``min_background`` say nothing (the frame is not judged moving).
   A slow move (a head's ramp, a fraction of a pixel per frame at first, or a creep) is seen by
   its sum: when the anchors, fitted from their still pixels (where each came to rest, or where the
   last moving frame left it) to where they are now, moved together by more than ``still_px``, the
