@@ -5,6 +5,8 @@ source itself."""
 from __future__ import annotations
 
 import ast
+import importlib
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -106,12 +108,9 @@ def test_benches_use_no_command_line_code():
         assert not any(m.startswith("sustain_drake.cli") for m in found), path
 
 
-
 def test_benches_import_names_the_package_has():
     """Every name a bench imports from the package exists (a bench is run by hand, rarely: a moved
     function must not break it unnoticed)."""
-    import importlib
-
     missing = []
     for path in sorted((ROOT / "bench").glob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):
@@ -122,6 +121,7 @@ def test_benches_import_names_the_package_has():
                             and not (hasattr(module, "__path__")  # a package's submodule
                                      and importlib.util.find_spec(f"{node.module}.{a.name}"))]
     assert missing == []
+
 
 @pytest.mark.parametrize("package", MATH)
 def test_the_math_imports_without_pydrake(package):

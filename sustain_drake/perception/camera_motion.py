@@ -364,15 +364,16 @@ def frame_motion(prev_px: np.ndarray, cur_px: np.ndarray, params: CameraMotionPa
         return FrameMotion(True, False, still, n, 0.0, 0.0)
     fraction = float(np.count_nonzero(inliers)) / n
     moved = displacement(M, points)
-    # A camera move moves every anchor as the fitted motion does: anchors enough to judge a frame by
-    # themselves that staying put explains better than the motion (by more than the still scene's
-    # own per-frame motion, view_still_px) are the scene, and the motion is of a body in front of it
-    # (a person who stood long enough for their features to be anchors, walking on: a similarity
-    # fits a compact group's shift and the still anchors around it within inlier_px).
-    stayed = (np.linalg.norm(cur_px - (prev_px @ M[:, :2].T + M[:, 2]), axis=1)
-              - np.linalg.norm(cur_px - prev_px, axis=1)) > params.view_still_px
-    moving = (fraction >= params.min_inlier_fraction and moved > params.still_px
-              and np.count_nonzero(stayed) < params.min_background)
+    moving = fraction >= params.min_inlier_fraction and moved > params.still_px
+    if moving:
+        # A camera move moves every anchor as the fitted motion does: anchors enough to judge a frame
+        # by themselves that staying put explains better than the motion (by more than the still
+        # scene's own per-frame motion, view_still_px) are the scene, and the motion is of a body in
+        # front of it (a person or the robot's unflagged features moving off: a similarity fits a
+        # compact group's shift and the still anchors around it within inlier_px).
+        stayed = (np.linalg.norm(cur_px - (prev_px @ M[:, :2].T + M[:, 2]), axis=1)
+                  - np.linalg.norm(cur_px - prev_px, axis=1)) > params.view_still_px
+        moving = int(np.count_nonzero(stayed)) < params.min_background
     return FrameMotion(True, moving, M, n, fraction, moved)
 
 

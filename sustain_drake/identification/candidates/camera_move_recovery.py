@@ -19,10 +19,12 @@ from sustain_drake.identification.candidates.fitting import (
     REGION_95,
     S_of,
     best_p_HP_given_camera,
+    camera_sd,
     explained,
     mean_squared_error_of,
     points_in_camera,
     rotation_spread,
+    sd_within_targets,
 )
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.params import CandidateParams
@@ -316,7 +318,8 @@ def _camera_near_turn_from_new_points(kept, archive, bank: CandidateBank, params
     covariance = joint_covariance(S_list, R_WC, p_WC, P)
     ids = {c.feature_id for c in kept}
     tracked = [k for k in range(len(points)) if points[k].feature_id in ids]
-    if not (tracked and np.linalg.norm(p_WC - p_turned) <= window and _within_targets(covariance, params)):
+    if not (tracked and np.linalg.norm(p_WC - p_turned) <= window
+            and sd_within_targets(camera_sd(covariance), params)):
         return None
     k = max(tracked, key=lambda i: points[i].solution.num_samples)
     return pack_x(R_WC, p_WC, P[k]), float(errors[k]), points[k].feature_id
@@ -326,18 +329,9 @@ def _within_accuracy_given_points(pairs: list, found, params: CandidateParams) -
     """Whether the 95 % region of the camera ``found`` (``R_WC, p_WC, ...``) that ``pairs``
     (``(candidate, p_HP)``) give with their ``p_HP`` fixed lies within ``camera_accuracy`` and
     ``camera_rotation_accuracy`` (``joint_covariance`` with ``points_known``)."""
-    return _within_targets(joint_covariance([S_of(c.statistic) for c, _ in pairs], found[0], found[1],
-                                            np.array([p for _, p in pairs]), points_known=True), params)
-
-
-def _within_targets(covariance: np.ndarray | None, params: CandidateParams) -> bool:
-    """Whether the 95 % region of a camera with ``covariance`` (its first 6 x 6 block: turn, rad, then
-    position, m; None: undetermined) lies within ``camera_accuracy`` and ``camera_rotation_accuracy``."""
-    if covariance is None:
-        return False
-    d = np.diagonal(covariance)
-    return (REGION_95 * math.sqrt(float(d[3:6].sum())) <= params.camera_accuracy
-            and REGION_95 * math.sqrt(float(d[0:3].sum())) <= params.camera_rotation_accuracy)
+    return sd_within_targets(camera_sd(joint_covariance(
+        [S_of(c.statistic) for c, _ in pairs], found[0], found[1], np.array([p for _, p in pairs]),
+        points_known=True)), params)
 
 
 def _turn_window(bank: CandidateBank, params: CandidateParams) -> tuple[np.ndarray, float]:

@@ -240,7 +240,14 @@ def joint_camera_sd(statistics: list, estimate: EyeToHandEstimate | None, params
     if estimate is None:
         return None
     P, weights = _points_and_weights(statistics, estimate.R_WC, estimate.p_WC, params)
-    covariance = joint_covariance([S_of(s) for s in statistics], estimate.R_WC, estimate.p_WC, P, weights)
+    S_list = [S_of(s) for s in statistics]
+    return camera_sd(joint_covariance(S_list, estimate.R_WC, estimate.p_WC, P, weights))
+
+
+def camera_sd(covariance: np.ndarray | None):
+    """``(position m, rotation rad)``: the RMS of the 3-D error of a camera whose covariance (a joint
+    fit's, ``eye_to_hand_points.joint_covariance``) starts with its turn (rad) and its position (m);
+    None when the covariance is (None: the fit undetermined)."""
     if covariance is None:
         return None
     d = np.diagonal(covariance)
@@ -260,6 +267,11 @@ def within_accuracy(statistics: list, estimate: EyeToHandEstimate | None, params
     too few samples, waits (docs/hand_eye_record.md, "The joint fit's own uncertainty")."""
     if math.isinf(params.camera_accuracy) and math.isinf(params.camera_rotation_accuracy):
         return True
-    sd = joint_camera_sd(statistics, estimate, params)
+    return sd_within_targets(joint_camera_sd(statistics, estimate, params), params)
+
+
+def sd_within_targets(sd, params: CandidateParams) -> bool:
+    """Whether a camera's 95 % region (its ``camera_sd`` times ``REGION_95``) lies within
+    ``camera_accuracy`` and ``camera_rotation_accuracy``; False for None (undetermined)."""
     return (sd is not None and REGION_95 * sd[0] <= params.camera_accuracy
             and REGION_95 * sd[1] <= params.camera_rotation_accuracy)
