@@ -32,8 +32,13 @@ from sustain_drake.identification.errors import (
     rotation,
     to_float_array,
 )
-from sustain_drake.identification.eye_to_hand import N_UNKNOWNS, _pack_x
-from sustain_drake.identification.rotation import _nearest_rotation, _rotation_jacobian, _so3_exp
+from sustain_drake.identification.eye_to_hand import N_UNKNOWNS, _conditioning_transform, _pack_x
+from sustain_drake.identification.rotation import (
+    _nearest_rotation,
+    _projection_parts,
+    _rotation_jacobian,
+    _so3_exp,
+)
 
 
 def _statistics(S_list) -> list[np.ndarray]:
@@ -240,6 +245,40 @@ def camera_given_points(S_list: list[np.ndarray], p_HP: np.ndarray):
     p_WC = _position_given_rotation(P, n, R)
     scatter = P[0:9:3, 0:9:3] - np.outer(P[0:9:3, 9], P[0:9:3, 9]) / n  # n C: P_RR = (sum a a^T) x I
     return R, p_WC, _spread_off_line(scatter / n)
+
+
+def joint_tls(S_list: list[np.ndarray]):
+    """The paper's total least squares (Eq. (36), §3.1) for K points sharing one camera: the
+    unknowns ``z = [vec R_WC; p_WC; p_HP_1; ...; p_HP_K; 1]`` (13 + 3K) and the sum of every point's
+    Eq. (30) cost ``x_k^T S_k x_k`` (each ``x_k`` the camera's entries, point k's and the
+    homogeneous one) as one quadratic form in ``z``, whose smallest eigenvector, projected onto
+    SO(3) as one point's is, is the estimate. Beyond the paper: no point needs enough samples
+    and views on its own (a track that ends every few seconds, a person walking between), only
+    all of them together, and no starting guess is needed. Conditioned as one point's statistic
+    is (``eye_to_hand.conditioning_transform`` of their sum: the pooled camera points centred and
+    scaled; each ``p_HP`` as it is). Returns ``(R_WC, p_WC, p_HP)`` (``p_HP``: K x 3), or None
+    when the rotation block of the eigenvector vanishes (the hand did not turn) or the solve is
+    not finite. IdentificationError unless ``S_list`` is a non-empty list of finite 16 x 16
+    statistics of at least one sample."""
+    S_list = _statistics(S_list)
+    K = len(S_list)
+    if not K or not all(S[9, 9] > 0.0 for S in S_list):
+        raise IdentificationError("joint_tls needs at least one statistic, each of one sample or more")
+    n = 13 + 3 * K
+    M, T_joint = np.zeros((n, n)), np.zeros((n, n))
+    T = _conditioning_transform(np.sum(S_list, axis=0))
+    for k, S in enumerate(S_list):
+        idx = np.r_[0:12, 12 + 3 * k: 15 + 3 * k, n - 1]
+        M[np.ix_(idx, idx)] += S
+        T_joint[np.ix_(idx, idx)] = T  # the camera's and the homogeneous entries are shared
+    with np.errstate(all="ignore"):
+        _, vectors = np.linalg.eigh(T_joint.T @ M @ T_joint)
+        z = T_joint @ vectors[:, 0]
+        R, a, _, _ = _projection_parts(z[0:9])
+        z = a * z
+    if a == 0.0 or not np.all(np.isfinite(z)):
+        return None
+    return R, z[9:12].copy(), z[12:n - 1].reshape(K, 3).copy()
 
 
 def spread_off_line(covariance: np.ndarray) -> float:

@@ -32,7 +32,8 @@ system in an abstract state): ``step(bank, params, criteria, frame)`` once per t
   drops every candidate; identification starts again from the body features seen then, unless the
   abandoned model's camera explains a new point (``slip_recovery``, ``keep_camera``: a slip) or,
   after a camera move, the points it observed still fit one new camera with their ``p_HP``
-  (``camera_move_recovery``, ``keep_tool_points``).
+  (``camera_move_recovery``, ``keep_tool_points``); where tracks end before any converges (a person
+  walking between), the points since the reset give the camera together (``track_consensus``).
 """
 
 from sustain_drake.identification.candidates import (
@@ -45,6 +46,7 @@ from sustain_drake.identification.candidates import (
     observation,
     params,
     slip_recovery,
+    track_consensus,
 )
 from sustain_drake.identification.candidates.admission import within_motion_gate
 from sustain_drake.identification.candidates.bank import (
@@ -105,6 +107,7 @@ __all__ = [
     "stitch",
     "step",
     "summary",
+    "track_consensus",
     "within_motion_gate",
     "x_is_set",
 ]

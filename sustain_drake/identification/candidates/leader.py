@@ -5,13 +5,14 @@ must confirm its camera (``confirm_with_witness``), the camera may be refined jo
 it explains (``joint``, ``refine_interval``), and a leader whose views do not pin the camera's rotation
 (``min_rotation_lever``, ``min_adopt_rotation_spread``) or whose camera's 95 % region exceeds the
 accuracy asked for (``camera_accuracy``) waits for more motion. With no leader, the
-recoveries after a slip and after a camera move may choose one."""
+recoveries after a slip and after a camera move may choose one, and with none converged, the
+consensus of the tracks since the reset (``track_consensus``: tracks that end before any converges)."""
 
 from dataclasses import replace
 
 import numpy as np
 
-from sustain_drake.identification.candidates import camera_move_recovery, slip_recovery
+from sustain_drake.identification.candidates import camera_move_recovery, slip_recovery, track_consensus
 from sustain_drake.identification.candidates.admission import solve
 from sustain_drake.identification.candidates.bank import Adoption, Candidate, CandidateBank
 from sustain_drake.identification.candidates.fitting import (
@@ -79,6 +80,8 @@ def choose(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCr
         pool = slip_recovery.recover(bank, params, seen, pool)
     elif pool.leader < 0 and bank.known_points:
         pool = camera_move_recovery.recover(bank, params, seen, pool)
+    if pool.leader < 0 and not converged and params.joint and track_consensus.due(bank.last_frame, seen.time):
+        pool = track_consensus.recover(params, criteria, seen, pool)
     # Once a leader was held back (min_rotation_lever, min_adopt_rotation_spread), more motion is wanted
     # until one leads or no converged candidate is left (then the detector's trials must find new body
     # features).
