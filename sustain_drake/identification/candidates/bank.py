@@ -42,7 +42,7 @@ class Adoption:
     candidate's samples, only its ``p_HP`` is new; after a camera move ``"scene turn, tool points
     kept"``, ``"tool points found by the scene turn"``, ``"previous tool points"``, ``"scene turn,
     points since the move"`` and ``"points since the move, near the scene turn"``, see
-    ``camera_move_recovery``)."""
+    ``camera_move_recovery``; ``track_consensus.KIND`` where tracks ended before any converged)."""
 
     time: float
     feature_id: int

@@ -52,8 +52,10 @@ def due(last_frame: float, time: float) -> bool:
 
 def members_of(pool: Pool, params: CandidateParams) -> list:
     """The points that may join: tracked or ended since the reset, with ``observe_min_samples``
-    samples over ``min_rotation_spread`` of hand rotation (else a point of any link fits)."""
+    samples over ``min_rotation_spread`` of hand rotation (else a point of any link fits) and a
+    finite own error."""
     return [c for c in (*pool.kept, *pool.archive) if c.solution.num_samples >= params.observe_min_samples
+            and math.isfinite(c.solution.expected_mse)
             and rotation_spread(c.statistic) >= params.min_rotation_spread]
 
 
