@@ -10,10 +10,10 @@ What a short track cannot show is whether its point is fixed in H: a point of th
 the hand while the wrist stands still, and over a few seconds of a track it fits a ``p_HP`` of its
 own with a millimetre of error that a shared camera spreads over every point. So the camera is the
 consensus of the points, not the fit of all of them: each group of tracks seen together
-(``_cohorts``) proposes a camera, the points any proposal explains within ``joint_consistency`` of
-the best-fitting point's own error (the noise the statistics themselves show) are its inliers, and
-a camera is adopted only when its inliers include tracks of different times (one group's tracks
-share that group's motion; tracks of another time agree only on the true camera)."""
+(``_cohorts``) proposes a camera, the points it explains within their limits (``_limits``: a
+point's own error, the noise its statistic shows, capped at the members' median) are its inliers,
+and a camera is adopted only when its inliers include tracks of different times (one group's
+tracks share that group's motion; tracks of another time agree only on the true camera)."""
 
 import math
 from dataclasses import replace
