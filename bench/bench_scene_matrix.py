@@ -43,6 +43,22 @@ def _scene(c: dict) -> str:
             f"{c['disturbances']}, seed {c['seed']}")
 
 
+def region_coverage(table) -> tuple[int, int]:
+    """``(inside, judged)``: of the adoptions that report their camera's 95 % region (``metrics.json``'s
+    ``camera_region_95_mm``/``_deg``), how many hold the true error in both."""
+    inside = judged = 0
+    for _, row in table.iterrows():
+        if failed(row):
+            continue
+        for a in metrics_of(row, "hand_eye").get("adopted", []):
+            if a.get("camera_region_95_mm") is None:
+                continue
+            judged += 1
+            inside += (a["camera_position_error_mm"] <= a["camera_region_95_mm"]
+                       and a["camera_rotation_error_deg"] <= a["camera_region_95_deg"])
+    return inside, judged
+
+
 def row_maker(cells: list[dict]):
     def row_text(row) -> str:
         scene = _scene(cells[int(row["cell"])])
@@ -82,9 +98,14 @@ def main(argv=None) -> int:
     def every_target(table) -> list[str]:
         met = int(every_target_met(table).sum()) if not table.empty else 0
         converged = sum(bool(metrics_of(r, "hand_eye").get("adopted")) for _, r in table.iterrows())
-        return [f"- every hand-eye target: met on {met} of {len(table)} cells ({args.split} set); "
-                f"a camera adopted on {converged}, an honest 'not converged' (none adopted) on "
-                f"{len(table) - converged}"]
+        lines = [f"- every hand-eye target: met on {met} of {len(table)} cells ({args.split} set); "
+                 f"a camera adopted on {converged}, an honest 'not converged' (none adopted) on "
+                 f"{len(table) - converged}"]
+        inside, judged = region_coverage(table)
+        if judged:
+            lines.append(f"- the adopted camera inside its own 95 % region (position and rotation): "
+                         f"{inside} of {judged} adoptions that report one")
+        return lines
 
     return bench_main(rest, __doc__, f"{name}_{args.split}.yaml", "hand_eye", COLUMNS,
                       row_maker(cells), extra=every_target, block=f"bench_{name}_{args.split}")

@@ -94,6 +94,10 @@ def test_a_leader_waits_while_its_cameras_95_percent_region_exceeds_the_accuracy
     assert [a.feature_id for a in bank.adoptions] == [9]
     estimate = bank.find(9).solution.estimate
     sd = candidates.fitting.joint_camera_sd([bank.find(9).statistic], estimate, PARAMS)
+    # The adoption carries the camera's 1 sd it was judged by (the metrics' 95 % region): within
+    # the accuracy asked for, and wider than the sd of all the samples to the end.
+    region = candidates.fitting.REGION_95 * np.array(bank.adoptions[0].camera_sd)
+    assert np.all(region <= 0.05) and np.all(np.array(bank.adoptions[0].camera_sd) > np.array(sd))
     bank, _ = run(frames, params=replace(PARAMS, camera_accuracy=0.5 * candidates.fitting.REGION_95 * sd[0]))
     assert bank.leader < 0 and not bank.adoptions and bank.more_motion and bank.held_back == 9
 

@@ -193,6 +193,9 @@ def test_images_to_first_convergence():
     # hand: under the TRUE camera its samples fit within 5 mm.
     assert first["camera_position_error_mm"] < 10.0 and first["camera_rotation_error_deg"] < 0.5
     assert first["tool_point_error_mm"] < 10.0
+    # Its 95 % region, reported beside the error, is what it was adopted against (the loop's
+    # camera accuracy: 2 mm and 0.2 deg).
+    assert 0.0 < first["camera_region_95_mm"] <= 2.0 and 0.0 < first["camera_region_95_deg"] <= 0.2
     # The camera in use since is the adopted one (no refinement, no change): its worst error is the
     # adoption's.
     worst = metrics["model_in_use_worst"]

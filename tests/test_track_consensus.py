@@ -17,7 +17,7 @@ from sustain_drake.identification.candidates import (
     FrameInput,
     track_consensus,
 )
-from sustain_drake.identification.candidates.fitting import S_of
+from sustain_drake.identification.candidates.fitting import REGION_95, S_of
 from sustain_drake.identification.errors import IdentificationError
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.eye_to_hand_points import joint_tls, refine_joint
@@ -115,6 +115,8 @@ def test_tracks_that_end_before_any_converges_give_the_camera_together():
     assert 120 * DT + 99 * DT <= adoption.time <= 240 * DT
     assert np.linalg.norm(adoption.estimate.p_WC - P_TRUE) < 1e-3
     assert rotation_error_deg(adoption.estimate.R_WC) < 0.05
+    region = REGION_95 * np.array(adoption.camera_sd)  # within the targets it was adopted against
+    assert 0.0 < region[0] <= PARAMS.camera_accuracy and 0.0 < region[1] <= PARAMS.camera_rotation_accuracy
     leader = bank.find(bank.leader)
     assert np.linalg.norm(leader.solution.estimate.p_HP - points(4 + leader.feature_id - 100)) < 1e-3
     assert run(replace(PARAMS, joint=False), SHORT).adoptions == ()

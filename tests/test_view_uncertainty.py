@@ -56,13 +56,14 @@ def test_a_camera_is_within_the_accuracy_asked_for_only_when_its_95_percent_regi
     radius, angle = REGION_95 * sd_position, REGION_95 * sd_rotation
 
     def within(position, rotation):
-        return within_accuracy(states, estimate, replace(PARAMS, camera_accuracy=position,
-                                                         camera_rotation_accuracy=rotation))
+        return within_accuracy(joint_camera_sd(states, estimate, PARAMS),
+                               replace(PARAMS, camera_accuracy=position, camera_rotation_accuracy=rotation))
 
     assert within(1.01 * radius, 1.01 * angle)
     assert not within(0.99 * radius, 1.01 * angle) and not within(1.01 * radius, 0.99 * angle)
     assert within(math.inf, math.inf)  # off: no fit needed
-    assert not within_accuracy(states, None, replace(PARAMS, camera_accuracy=1.0))
+    assert within_accuracy(None, PARAMS)  # off (the default, inf): no sd needed
+    assert not within_accuracy(None, replace(PARAMS, camera_accuracy=1.0))  # undetermined
     for bad in (0.0, -1.0, math.nan):
         with pytest.raises(ValueError, match="camera_accuracy must be positive"):
             CandidateParams(camera_accuracy=bad)

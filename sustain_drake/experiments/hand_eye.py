@@ -34,6 +34,7 @@ from sustain_drake.experiments.targets import target_bound
 from sustain_drake.files import write_atomically
 from sustain_drake.identification import coordination
 from sustain_drake.identification.candidates import best_p_HP_given_camera
+from sustain_drake.identification.candidates.fitting import REGION_95
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.loops.hand_eye import (
@@ -235,6 +236,9 @@ def evaluate(handle, diagram, context) -> dict:
             "expected_rms_mm": 1e3 * math.sqrt(max(est.mean_squared_error, 0.0)),
             # How well the points' views pinned the camera's rotation (identified adoptions only).
             "rotation_lever_mm": 1e3 * a.rotation_lever if math.isfinite(a.rotation_lever) else None,
+            # The camera's own 95 % region when adopted (None where its fit gives no covariance):
+            # whether it holds the true error is the verdict's honesty on this scene.
+            **_region_95(a.camera_sd),
             # The adopted point's own identification (the paper's one point), beside the adopted
             # estimate (whose camera may be refined with other points: CandidateParams.joint).
             **_single_point_errors(identifier, X_WC),
@@ -349,6 +353,15 @@ def _camera_moves(handle, diagram, context) -> list[float] | None:
         return None
     times, data = _log(handle, diagram, context, "camera_motion")
     return [float(t) for t in times[1:][np.diff(data[:, 1]) > 0]]
+
+
+def _region_95(sd) -> dict:
+    """The adopted camera's 95 % region, ``fitting.REGION_95`` times its 1 sd (mm, deg; None
+    without one)."""
+    if sd is None:
+        return {"camera_region_95_mm": None, "camera_region_95_deg": None}
+    return {"camera_region_95_mm": 1e3 * REGION_95 * sd[0],
+            "camera_region_95_deg": math.degrees(REGION_95 * sd[1])}
 
 
 def _single_point_errors(identifier: EyeToHandIdentifier, X_WC: np.ndarray) -> dict:

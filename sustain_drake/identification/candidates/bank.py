@@ -52,6 +52,9 @@ class Adoption:
     estimate: EyeToHandEstimate | None = None
     kind: str = "identified"
     rotation_lever: float = math.nan  # m, the smallest (``smallest_rotation_lever``) when identified
+    # (m, rad): the adopted camera's 1 sd (``fitting.camera_sd`` of the fit that gave it), where
+    # that fit has a covariance (identified, and the consensus of the tracks); None elsewhere
+    camera_sd: tuple | None = None
 
 
 @dataclass(frozen=True)

@@ -259,15 +259,15 @@ def camera_sd(covariance: np.ndarray | None):
 REGION_95 = math.sqrt(float(chi2.ppf(0.95, 3)) / 3.0)
 
 
-def within_accuracy(statistics: list, estimate: EyeToHandEstimate | None, params: CandidateParams) -> bool:
-    """``camera_accuracy``, ``camera_rotation_accuracy``: whether the 95 % region of the camera fitted
-    to ``statistics`` (``joint_camera_sd`` times ``REGION_95``) lies within both. True when both are
-    off (inf); False without an estimate or when the fit is undetermined. The joint fit's sd
-    measures the views themselves: a camera from a few points seen from too few sides, or with
-    too few samples, waits (docs/hand_eye_record.md, "The joint fit's own uncertainty")."""
+def within_accuracy(sd, params: CandidateParams) -> bool:
+    """``camera_accuracy``, ``camera_rotation_accuracy``: whether the 95 % region of a camera whose
+    1 sd is ``sd`` (``joint_camera_sd`` of its fit; None: undetermined) lies within both. True when
+    both are off (inf). The joint fit's sd measures the views themselves: a camera from a few
+    points seen from too few sides, or with too few samples, waits (docs/hand_eye_record.md, "The
+    joint fit's own uncertainty")."""
     if math.isinf(params.camera_accuracy) and math.isinf(params.camera_rotation_accuracy):
         return True
-    return sd_within_targets(joint_camera_sd(statistics, estimate, params), params)
+    return sd_within_targets(sd, params)
 
 
 def sd_within_targets(sd, params: CandidateParams) -> bool:

@@ -18,6 +18,7 @@ from sustain_drake.identification.candidates.bank import Adoption, Candidate, Ca
 from sustain_drake.identification.candidates.fitting import (
     FIRST_CHOICE_POINTS,
     best_p_HP_given_camera,
+    joint_camera_sd,
     joint_refined,
     mean_squared_error_of,
     rotation_spread,
@@ -134,14 +135,15 @@ def _adopt(best: Candidate, params: CandidateParams, seen: SeenFrame, pool: Pool
     # camera_accuracy: the camera's own 95 % region must lie within the accuracy asked for (not
     # computed for a leader already held back). A point no longer seen gives no more views: it is
     # not adopted, and no longer held.
-    wide = not held_back and not within_accuracy(statistics, best.solution.estimate, params)
+    sd = None if held_back else joint_camera_sd(statistics, best.solution.estimate, params)
+    wide = not held_back and not within_accuracy(sd, params)
     if held_back or wide:
         return pool, not unseen
     kept = [best if c.feature_id == best.feature_id else c for c in pool.kept]
     leader = best.feature_id
     adoptions = pool.adoptions + (Adoption(float(seen.time), leader, best.statistic.copy(),
                                            best.admitted, pool.round_start, best.solution.estimate,
-                                           kind, lever),)
+                                           kind, lever, sd),)
     return replace(pool, kept=kept, leader=leader, adopted_mse=best.solution.expected_mse,
                    adoptions=adoptions), False
 

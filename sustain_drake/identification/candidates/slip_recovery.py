@@ -17,7 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from sustain_drake.identification.candidates.bank import Adoption, Candidate, CandidateBank, with_camera
-from sustain_drake.identification.candidates.fitting import joint_refined, within_accuracy
+from sustain_drake.identification.candidates.fitting import joint_camera_sd, joint_refined, within_accuracy
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
 from sustain_drake.identification.candidates.observation import consistent
 from sustain_drake.identification.candidates.params import CandidateParams
@@ -61,7 +61,7 @@ def views_confirm(best: Candidate, pool: Pool, params: CandidateParams) -> bool:
     previous = best.solution.estimate
     refined, statistics = joint_refined(best, pool.kept, pool.archive, params)
     estimate = refined.solution.estimate
-    if not within_accuracy(statistics, estimate, params):
+    if not within_accuracy(joint_camera_sd(statistics, estimate, params), params):
         return False
     turn = rotation_angle(nearest_rotation(previous.R_WC.T @ estimate.R_WC))
     return bool(np.linalg.norm(estimate.p_WC - previous.p_WC) <= params.camera_accuracy

@@ -82,8 +82,8 @@ def recover(params: CandidateParams, criteria: ConvergenceCriteria, seen: SeenFr
     tracked = [k for k, c in enumerate(inliers) if c.feature_id in ids]
     if not tracked or sum(c.solution.num_samples for c in inliers) < criteria.min_samples:
         return pool
-    covariance = joint_covariance([S_of(c.statistic) for c in inliers], R_WC, p_WC, P)
-    if not sd_within_targets(camera_sd(covariance), params):
+    sd = camera_sd(joint_covariance([S_of(c.statistic) for c in inliers], R_WC, p_WC, P))
+    if not sd_within_targets(sd, params):
         return pool
     k = max(tracked, key=lambda i: inliers[i].solution.num_samples)
     leader = inliers[k].feature_id
@@ -94,7 +94,8 @@ def recover(params: CandidateParams, criteria: ConvergenceCriteria, seen: SeenFr
                        f"converged: the camera identified jointly with {len(inliers)} points since the reset")
     kept = [best if c.feature_id == leader else c for c in pool.kept]
     adoptions = pool.adoptions + (Adoption(float(seen.time), leader, best.statistic.copy(), best.admitted,
-                                           pool.round_start, best.solution.estimate, KIND),)
+                                           pool.round_start, best.solution.estimate, KIND,
+                                           camera_sd=sd),)
     return replace(pool, kept=kept, leader=leader, adoptions=adoptions, adopted_mse=expected)
 
 
