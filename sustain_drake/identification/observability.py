@@ -68,6 +68,7 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg import lapack
+from scipy.stats import chi2
 
 from sustain_drake.identification.errors import real_array, real_number, rotation
 from sustain_drake.identification.rotation import _rotation_jacobian, _so3_exp
@@ -100,6 +101,13 @@ AGREEMENT_FACTOR = 3.0
 AGREEMENT_FLOOR = 1e-3
 LINE_FLOOR = 1e-3
 MAX_COM_ERROR = 0.01  # m
+
+
+def region_95(dimensions: int) -> float:
+    """The radius that holds 95 % of an isotropic normal error in ``dimensions`` dimensions, over the
+    error's RMS (``sqrt(trace)`` of its covariance): ``sqrt(chi2_k(0.95) / k)`` (1.960 for one, 1.614
+    for three, 1.449 for six). A 95 % region lies within a bound when this times the RMS does."""
+    return math.sqrt(float(chi2.ppf(0.95, dimensions)) / dimensions)
 
 _AXIS_COS = math.cos(math.radians(10.0))  # an axis within 10 deg of a frame axis is named after it
 # Flat indices in the 16 x 16 eye-to-hand statistic: sum c_x^2, c_y^2, c_z^2 (camera points),

@@ -17,8 +17,9 @@ after), over ``M n_eff - N``.
 ``DynamicPayloadRLS`` applies it to the dynamic payload: ``theta = [phi; b]`` (16) and
 ``[Y_t, I_6] theta = wrench_t`` with the regressor of ``payload_dynamic`` (torque rows divided by the
 same torque length), so both identifiers see the same equations. Unlike the sustainable identifier,
-RLS has no verdict of its own: ``DynamicPayloadRLS.identified`` applies the same uncertainty bounds
-as the dynamic verdict (``dynamic_observability``) to its covariance, and nothing else.
+RLS has no verdict of its own: ``DynamicPayloadRLS.identified`` applies the dynamic verdict's accuracy
+(``dynamic_observability.accuracy_problem``: every 95 % region within its bound) to its covariance, and
+nothing else.
 
 Every public function and method raises ``IdentificationError`` (a ``ValueError``) with a one-line
 message for an argument of the wrong type, shape or value.
@@ -31,13 +32,8 @@ import math
 import numpy as np
 
 from sustain_drake.identification import payload_dynamic as dynamic
-from sustain_drake.identification.dynamic_observability import (
-    MAX_INERTIA_ERROR,
-    MAX_MASS_ERROR,
-    dynamic_payload_errors,
-)
+from sustain_drake.identification.dynamic_observability import accuracy_problem
 from sustain_drake.identification.errors import IdentificationError, integer, real_array, real_number
-from sustain_drake.identification.observability import MAX_COM_ERROR
 
 
 class RecursiveLeastSquares:
@@ -133,17 +129,12 @@ class DynamicPayloadRLS:
         return self._rls.covariance
 
     def identified(self) -> bool:
-        """Whether the estimate meets the dynamic verdict's uncertainty bounds (1 sd: mass within
-        1 %, centre of mass within 10 mm, rotational inertia within 10 % of its largest principal
-        moment) and is physically valid: RLS's own "identified"."""
-        phi = self._rls.theta[: dynamic.N_INERTIAL]
-        covariance = self._rls.covariance
-        if not (phi[0] > 0.0 and np.isfinite(covariance).all()):
+        """Whether the estimate is physically valid and its 95 % regions lie within the dynamic
+        verdict's accuracy (``dynamic_observability.accuracy_problem``): RLS's own "identified"."""
+        theta, covariance = self._rls.theta, self._rls.covariance
+        if not (theta[0] > 0.0 and np.isfinite(covariance).all() and np.isfinite(theta).all()):
             return False
-        _, _, I_Cm = dynamic.central_inertia(phi)
+        _, _, I_Cm = dynamic.central_inertia(theta[: dynamic.N_INERTIAL])
         if dynamic.physical_inertia_problem(I_Cm) is not None:
             return False
-        sd_mass, sd_com, sd_inertia = dynamic_payload_errors(covariance, phi)
-        largest = float(np.linalg.eigvalsh(I_Cm)[-1])
-        return (sd_mass <= MAX_MASS_ERROR * float(phi[0]) and sd_com <= MAX_COM_ERROR
-                and sd_inertia <= MAX_INERTIA_ERROR * largest)  # fmt: skip
+        return accuracy_problem(covariance, theta) is None

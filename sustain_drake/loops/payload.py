@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pydrake.math import RigidTransform
 from pydrake.systems.primitives import ConstantVectorSource
 
+from sustain_drake.identification import payload_dynamic
 from sustain_drake.loops.identify_observe import CoordinationConfig, connect_identify_observe
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.quasi_static_gate import QuasiStaticGate
@@ -67,7 +68,8 @@ class KinestheticConfig:
     mode: str = "static"
     # the dynamic mode's settings
     dynamic: DynamicPayloadConfig = field(default_factory=DynamicPayloadConfig)
-    # convergence and observation; max_expected_rms 0.3 (static: m/s^2 and N m, about 3 % of g; dynamic: N)
+    # convergence and observation; max_expected_rms 0.3 (static: m/s^2 and N m, about 3 % of g; dynamic: N);
+    # min_gap_ratio is the static mode's (the dynamic mode's precision is its 95 % regions')
     coordination: CoordinationConfig = field(default_factory=_payload_coordination)
     period: float = 0.01  # s between identifier and state-machine updates: the wrench sensor's 100 Hz
     # when a wrench sample is quasi-static enough to identify from
@@ -92,13 +94,14 @@ class PayloadLoop:
 
 def payload_formulation(config: KinestheticConfig):
     """The identifier's formulation of ``config.mode``: ``PayloadFormulation`` (static) or
-    ``DynamicPayloadFormulation``, with the criteria of ``config.coordination``. ValueError for an
-    unknown mode."""
+    ``DynamicPayloadFormulation``, with the criteria of ``config.coordination`` (the dynamic mode with
+    its own gap, ``payload_dynamic.MIN_GAP_RATIO``). ValueError for an unknown mode."""
     c = config.coordination
     criteria = c.criteria(has_rotation=False)
     if config.mode == "static":
         return PayloadFormulation(criteria=criteria, forgetting_factor=c.forgetting_factor)
-    if config.mode == "dynamic":
+    if config.mode == "dynamic":  # its gap is only (b)'s; its 95 % regions judge the precision
+        criteria = dataclasses.replace(criteria, min_gap_ratio=payload_dynamic.MIN_GAP_RATIO)
         return DynamicPayloadFormulation(criteria, c.forgetting_factor, config.dynamic.torque_length)
     raise ValueError(f"kinesthetic.mode must be one of {', '.join(PAYLOAD_MODES)}, got {config.mode!r}")
 

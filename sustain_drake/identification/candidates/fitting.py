@@ -6,7 +6,6 @@ import math
 from dataclasses import replace
 
 import numpy as np
-from scipy.stats import chi2
 
 from sustain_drake.identification.candidates.bank import Candidate
 from sustain_drake.identification.candidates.params import CandidateParams
@@ -17,6 +16,7 @@ from sustain_drake.identification.eye_to_hand import (
     pack_x,
 )
 from sustain_drake.identification.eye_to_hand_points import joint_covariance, refine_joint, rotation_levers
+from sustain_drake.identification.observability import region_95
 from sustain_drake.identification.sustainable_identifier import SustainableIdentifier
 
 
@@ -254,9 +254,8 @@ def camera_sd(covariance: np.ndarray | None):
     return math.sqrt(float(d[3:6].sum())), math.sqrt(float(d[0:3].sum()))
 
 
-# ratio of the radius that holds 95 % of an isotropic 3-D normal error to the error's RMS
-# (``sqrt(trace)`` of its covariance): ``sqrt(chi2_3(0.95) / 3)`` = 1.614
-REGION_95 = math.sqrt(float(chi2.ppf(0.95, 3)) / 3.0)
+# the radius that holds 95 % of an isotropic 3-D normal error over the error's RMS: 1.614
+REGION_95 = region_95(3)
 
 
 def within_accuracy(sd, params: CandidateParams) -> bool:
