@@ -109,6 +109,7 @@ def region_95(dimensions: int) -> float:
     for three, 1.449 for six). A 95 % region lies within a bound when this times the RMS does."""
     return math.sqrt(float(chi2.ppf(0.95, dimensions)) / dimensions)
 
+
 _AXIS_COS = math.cos(math.radians(10.0))  # an axis within 10 deg of a frame axis is named after it
 # Flat indices in the 16 x 16 eye-to-hand statistic: sum c_x^2, c_y^2, c_z^2 (camera points),
 # sum |p_WH|^2 and -sum p_WH (hand positions).
