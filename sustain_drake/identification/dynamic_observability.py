@@ -61,6 +61,7 @@ COM_ACCURACY = 0.001  # m
 INERTIA_ACCURACY = 0.1  # of the largest principal moment about the centre of mass
 BIAS_TORQUE_ACCURACY = 0.002  # N m, each component
 BIAS_FORCE_ACCURACY = 0.05  # N, each component
+_REGIONS_95 = region_95(1), region_95(3), region_95(6)  # a scalar, a 3-vector, the inertia's six
 
 # The 3 x 3 inertia matrix's entries in the order of phi[4:10]: xx, yy, zz, xy, xz, yz.
 _SIX = ([0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2])
@@ -142,7 +143,7 @@ def payload_regions_95(covariance: np.ndarray, theta: np.ndarray) -> dict[str, f
     largest = float(np.linalg.eigvalsh(I_Cm)[-1])
     d = np.diagonal(covariance)
     sd_tau, sd_f = math.sqrt(max(float(d[10:13].sum()), 0.0)), math.sqrt(max(float(d[13:16].sum()), 0.0))
-    one, three, six = region_95(1), region_95(3), region_95(6)
+    one, three, six = _REGIONS_95
     return {"mass": one * sd_mass / (MASS_ACCURACY * mass), "com": three * sd_com / COM_ACCURACY,
             "inertia": six * sd_inertia / (INERTIA_ACCURACY * largest) if largest > 0.0 else math.inf,
             "bias_tau": three * sd_tau / BIAS_TORQUE_ACCURACY, "bias_f": three * sd_f / BIAS_FORCE_ACCURACY}

@@ -70,7 +70,7 @@ import numpy as np
 from scipy.linalg import lapack
 from scipy.stats import chi2
 
-from sustain_drake.identification.errors import real_array, real_number, rotation
+from sustain_drake.identification.errors import integer, real_array, real_number, rotation
 from sustain_drake.identification.rotation import _rotation_jacobian, _so3_exp
 from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, EigenSolution, Verdict
 
@@ -106,8 +106,10 @@ MAX_COM_ERROR = 0.01  # m
 def region_95(dimensions: int) -> float:
     """The radius that holds 95 % of an isotropic normal error in ``dimensions`` dimensions, over the
     error's RMS (``sqrt(trace)`` of its covariance): ``sqrt(chi2_k(0.95) / k)`` (1.960 for one, 1.614
-    for three, 1.449 for six). A 95 % region lies within a bound when this times the RMS does."""
-    return math.sqrt(float(chi2.ppf(0.95, dimensions)) / dimensions)
+    for three, 1.449 for six). A 95 % region lies within a bound when this times the RMS does.
+    IdentificationError unless ``dimensions`` is an integer >= 1."""
+    k = integer("dimensions", dimensions, 1)
+    return math.sqrt(float(chi2.ppf(0.95, k)) / k)
 
 
 _AXIS_COS = math.cos(math.radians(10.0))  # an axis within 10 deg of a frame axis is named after it
