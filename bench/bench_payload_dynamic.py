@@ -2,6 +2,7 @@
 estimator on the same recorded streams.
 
     .venv/bin/python bench/bench_payload_dynamic.py [--seeds 11 1 2 3 4] [--duration 12] [--results]
+    .venv/bin/python bench/bench_payload_dynamic.py --coverage 100 [--seeds ...] [--results]
 
 One simulation per run of ``diagrams/inertia_touch.yaml`` (the babbling only: its touching program and
 its payload loop off; the sensor's gripper compensation off, so the wrench is that of the whole body
@@ -80,6 +81,7 @@ class Run:
     bias: tuple = (0.0,) * 6
     fast: bool = False
     rigid: bool = False
+    noise_free: bool = False  # the sensor without noise (``coverage`` draws it)
 
 
 @dataclass
@@ -102,7 +104,32 @@ def scenario_of(run: Run, duration: float):
     scenario.wrench_sensor.bias = list(run.bias)
     if run.fast:
         scenario.motion.dwell, scenario.motion.max_speed, scenario.motion.min_duration = 0.0, 2.0, 0.5
+    if run.noise_free:
+        scenario.wrench_sensor.force_noise = scenario.wrench_sensor.torque_noise = 0.0
     return scenario
+
+
+def coverage(seed: int, draws: int, duration: float = 2.0) -> list[str]:
+    """How often the verdict's declared estimate lies outside its accuracy bounds, over ``draws``
+    draws of the scenario's white sensor noise added to one noise-free stream of motion without rests
+    with the grasp held rigid (so the rigid model is exact and only the noise is random): per bound,
+    the draws whose error at declaration exceeds it (a 95 % region should leave about 1 in 20), and
+    the draws within every bound."""
+    run = Run(f"fast, rigid, seed {seed}", seed, fast=True, rigid=True, noise_free=True)
+    streams, sensor = record(run, duration), scenario_of(Run("", seed), duration).wrench_sensor
+    sd = np.array([sensor.torque_noise] * 3 + [sensor.force_noise] * 3)
+    rng, clean = np.random.default_rng(seed), streams["wrench"]
+    outcomes = []
+    for _ in range(draws):
+        streams["wrench"] = clean + rng.normal(size=clean.shape) * sd
+        outcomes.append(evaluate(streams, "sustainable"))
+    said = [o for o in outcomes if o.identified is not None]
+    misses = {key: sum(o.errors[key] > TARGETS[key] for o in said) for key in TARGETS}
+    cells = [run.name, str(draws), str(len(said)), _span([o.identified for o in said], ".2f")]
+    cells += [str(misses[key]) for key in TARGETS] + [str(sum(within(o.errors) for o in said))]
+    header = ["stream", "noise draws", "identified", "identified (s)", "mass > 0.5 %", "CoM > 1 mm",
+              "inertia > 10 %", "bias f > 0.05 N", "bias tau > 0.002 N m", "within every target"]
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header), "| " + " | ".join(cells) + " |"]
 
 
 def record(run: Run, duration: float) -> dict:
@@ -299,7 +326,19 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[11, 1, 2, 3, 4], help="babbling seeds (>= 2)")
     p.add_argument("--duration", type=float, default=12.0, help="simulated seconds per run")
     p.add_argument("--results", action="store_true", help="also write the tables on docs/results.md")
+    p.add_argument("--coverage", type=int, metavar="DRAWS",
+                   help="instead: the verdict's misses over DRAWS noise draws on each seed's rigid stream")
     args = p.parse_args(argv)
+    if args.coverage is not None:
+        if args.coverage < 1:
+            raise SystemExit("--coverage needs at least one draw")
+        lines = coverage(args.seeds[0], args.coverage)
+        for seed in args.seeds[1:]:
+            lines += coverage(seed, args.coverage)[2:]
+        print("\n".join(lines))
+        if args.results:
+            publish("bench_payload_dynamic_coverage", lines)
+        return 0
     if args.results and (args.seeds != [11, 1, 2, 3, 4] or args.duration != 12.0):
         raise SystemExit("--results publishes the default seeds and duration only")
     results = []
