@@ -295,6 +295,23 @@ def test_a_95_percent_region_holds_95_percent_of_normal_errors(dimensions, radiu
     assert inside.mean() == pytest.approx(0.95, abs=0.003)
 
 
+@pytest.mark.parametrize("shape", ["isotropic", "one direction", "two of six", "random"])
+def test_the_95_percent_radius_holds_95_percent_whatever_the_covariances_shape(shape):
+    rng = np.random.default_rng(7)
+    k = 3 if shape == "isotropic" else 6
+    L = {"isotropic": np.eye(3), "one direction": np.diag([1.0, 1e-3, 1e-3, 1e-3, 1e-3, 1e-3]),
+         "two of six": np.diag([1.0, 0.7, 0.05, 0.05, 0.05, 0.05]), "random": rng.normal(size=(6, 6))}[shape]
+    covariance = L @ L.T
+    errors = rng.normal(size=(200_000, k)) @ L.T
+    radius = observability.radius_95(covariance)
+    assert np.mean(np.linalg.norm(errors, axis=1) <= radius) == pytest.approx(0.95, abs=0.006)
+    if shape == "isotropic":
+        assert radius == pytest.approx(observability.region_95(3) * math.sqrt(3.0), rel=1e-3)
+    if shape == "one direction":
+        assert radius == pytest.approx(1.96, rel=0.01)
+    assert observability.radius_95(np.zeros((3, 3))) == 0.0
+
+
 def _first_declared(kinematics, wrenches):
     """The first converged solution of the stream fed sample by sample (None if none)."""
     identifier = pd.DynamicPayloadIdentifier()
@@ -338,7 +355,7 @@ def test_each_bound_of_the_accuracy_holds_a_declaration_back():
               (10, dyn_obs.BIAS_TORQUE_ACCURACY, "torque bias"), (13, dyn_obs.BIAS_FORCE_ACCURACY, "force"))
     for index, bound, words in bounds:
         covariance = base.copy()
-        covariance[index, index] = (1.1 * bound / observability.region_95(1 if index == 0 else 3)) ** 2
+        covariance[index, index] = (1.1 * bound / observability.region_95(1)) ** 2  # one direction
         regions = dyn_obs.payload_regions_95(covariance, x)
         assert max(regions.values()) > 1.0, words
         problem = dyn_obs.accuracy_problem(covariance, x)

@@ -17,10 +17,11 @@ reasons (``ONE_ORIENTATION``, ``NO_ROTATION``, ``ONE_AXIS``, ``UNDETERMINED``,
    rotational inertia (``payload_dynamic``), then (a).
 6. The homogeneous coordinate of the conditioned ``v_N`` is at least ``MIN_HOMOGENEOUS``.
 8. Uncertainty, from least squares' covariance ``sigma^2 S[:16, :16]^-1``: the 95 % region
-   (``observability.region_95`` times the RMS error) of each estimate within the accuracy a dynamic
-   identification is declared at (``accuracy_problem``): the mass within ``MASS_ACCURACY`` (0.5 %)
-   of it, the centre of mass within ``COM_ACCURACY`` (1 mm), the rotational inertia about the centre
-   of mass within ``INERTIA_ACCURACY`` (10 %) of its largest principal moment, the bias within
+   (``observability.radius_95`` of each error's covariance, to first order) of each estimate within
+   the accuracy a dynamic identification is declared at (``accuracy_problem``): the mass within
+   ``MASS_ACCURACY`` (0.5 %) of it, the centre of mass within ``COM_ACCURACY`` (1 mm), the rotational
+   inertia about the centre of mass within ``INERTIA_ACCURACY`` (10 %, its Frobenius norm, which
+   bounds the spectral one) of its largest principal moment, the bias within
    ``BIAS_TORQUE_ACCURACY`` (0.002 N m) and ``BIAS_FORCE_ACCURACY`` (0.05 N). A 1 sd bound declares
    with errors up to twice it; the 95 % region is the error the verdict promises. The centre of
    mass's bound also keeps the observation honest: 1 mm of it is ``m g 1 mm / l`` (0.35 N for 0.9 kg
@@ -50,6 +51,7 @@ from sustain_drake.identification.observability import (
     _guarded,
     _homogeneous_problem,
     _mm,
+    radius_95,
     region_95,
 )
 from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, EigenSolution, Verdict
@@ -61,7 +63,6 @@ COM_ACCURACY = 0.001  # m
 INERTIA_ACCURACY = 0.1  # of the largest principal moment about the centre of mass
 BIAS_TORQUE_ACCURACY = 0.002  # N m, each component
 BIAS_FORCE_ACCURACY = 0.05  # N, each component
-_REGIONS_95 = region_95(1), region_95(3), region_95(6)  # a scalar, a 3-vector, the inertia's six
 
 # The 3 x 3 inertia matrix's entries in the order of phi[4:10]: xx, yy, zz, xy, xz, yz.
 _SIX = ([0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2])
@@ -135,18 +136,17 @@ def payload_regions_95(covariance: np.ndarray, theta: np.ndarray) -> dict[str, f
     covariance = real_array("covariance", covariance, (16, 16))
     theta = real_array("theta", theta, (16,))
     phi, mass = theta[:10], float(theta[0])
-    sd_mass, sd_com, sd_inertia = dynamic_payload_errors(covariance, phi)
+    var_mass, C_com, C_inertia = _error_covariances(covariance, phi)
     h = phi[1:4]
     I_Cm = np.zeros((3, 3))
     I_Cm[_SIX] = phi[4:10]
     I_Cm = np.triu(I_Cm) + np.triu(I_Cm, 1).T + (np.outer(h, h) - float(h @ h) * np.eye(3)) / mass
     largest = float(np.linalg.eigvalsh(I_Cm)[-1])
-    d = np.diagonal(covariance)
-    sd_tau, sd_f = math.sqrt(max(float(d[10:13].sum()), 0.0)), math.sqrt(max(float(d[13:16].sum()), 0.0))
-    one, three, six = _REGIONS_95
-    return {"mass": one * sd_mass / (MASS_ACCURACY * mass), "com": three * sd_com / COM_ACCURACY,
-            "inertia": six * sd_inertia / (INERTIA_ACCURACY * largest) if largest > 0.0 else math.inf,
-            "bias_tau": three * sd_tau / BIAS_TORQUE_ACCURACY, "bias_f": three * sd_f / BIAS_FORCE_ACCURACY}
+    mass_95 = region_95(1) * math.sqrt(max(var_mass, 0.0))
+    return {"mass": mass_95 / (MASS_ACCURACY * mass), "com": radius_95(C_com) / COM_ACCURACY,
+            "inertia": radius_95(C_inertia) / (INERTIA_ACCURACY * largest) if largest > 0.0 else math.inf,
+            "bias_tau": radius_95(covariance[10:13, 10:13]) / BIAS_TORQUE_ACCURACY,
+            "bias_f": radius_95(covariance[13:16, 13:16]) / BIAS_FORCE_ACCURACY}
 
 
 def accuracy_problem(covariance: np.ndarray, theta: np.ndarray) -> str | None:
@@ -200,6 +200,15 @@ def dynamic_payload_errors(covariance: np.ndarray, phi: np.ndarray) -> tuple[flo
     10 x 10 block), to first order: ``p = h / m``, ``I_Cm = I_Ko + (h h^T - |h|^2 I_3) / m``.
     IdentificationError unless ``covariance`` is a finite square matrix of at least 10 rows and
     ``phi`` a finite 10-vector."""
+    var_mass, C_com, C_inertia = _error_covariances(covariance, phi)
+    return (math.sqrt(max(var_mass, 0.0)), math.sqrt(max(float(np.trace(C_com)), 0.0)),
+            math.sqrt(max(float(np.trace(C_inertia)), 0.0)))
+
+
+def _error_covariances(covariance: np.ndarray, phi: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """The mass's variance, the centre of mass's 3 x 3 covariance and the 6 x 6 covariance of the
+    central inertia's error entries ``xx, yy, zz, sqrt(2) xy, sqrt(2) xz, sqrt(2) yz`` (so that its
+    trace is the Frobenius norm's expected square), to first order (``dynamic_payload_errors``)."""
     covariance = real_array("covariance", covariance, (None, None))
     phi = real_array("phi", phi, (10,))
     if covariance.shape[0] < 10 or covariance.shape[0] != covariance.shape[1]:
@@ -214,7 +223,5 @@ def dynamic_payload_errors(covariance: np.ndarray, phi: np.ndarray) -> tuple[flo
     for i in range(3):
         e = np.eye(3)[i]
         J[:, 1 + i] = (np.outer(e, h) + np.outer(h, e) - 2.0 * h[i] * np.eye(3))[_SIX] / m
-    variances = np.diagonal(J @ C @ J.T)
-    sd_inertia = math.sqrt(max(float(variances[:3].sum() + 2.0 * variances[3:].sum()), 0.0))
-    sd_com = math.sqrt(max(float(np.trace(J_p @ C[:4, :4] @ J_p.T)), 0.0))
-    return math.sqrt(max(float(C[0, 0]), 0.0)), sd_com, sd_inertia
+    J[3:] *= math.sqrt(2.0)  # each product appears twice in the matrix
+    return float(C[0, 0]), J_p @ C[:4, :4] @ J_p.T, J @ C @ J.T

@@ -70,7 +70,13 @@ import numpy as np
 from scipy.linalg import lapack
 from scipy.stats import chi2
 
-from sustain_drake.identification.errors import integer, real_array, real_number, rotation
+from sustain_drake.identification.errors import (
+    IdentificationError,
+    integer,
+    real_array,
+    real_number,
+    rotation,
+)
 from sustain_drake.identification.rotation import _rotation_jacobian, _so3_exp
 from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, EigenSolution, Verdict
 
@@ -110,6 +116,28 @@ def region_95(dimensions: int) -> float:
     IdentificationError unless ``dimensions`` is an integer >= 1."""
     k = integer("dimensions", dimensions, 1)
     return math.sqrt(float(chi2.ppf(0.95, k)) / k)
+
+
+# region_95 for an effective number of dimensions from 1 to 16 (radius_95 interpolates)
+_DIMENSIONS = np.linspace(1.0, 16.0, 301)
+_REGION_95 = np.sqrt(chi2.ppf(0.95, _DIMENSIONS) / _DIMENSIONS)
+
+
+def radius_95(covariance) -> float:
+    """The radius that holds 95 % of a normal error of covariance ``covariance`` (k x k, k <= 16):
+    ``|e|^2`` is a sum of chi-squares weighted by the eigenvalues ``l_i``, matched (Satterthwaite) by
+    ``c chi2_nu`` with ``nu = (sum l_i)^2 / sum l_i^2``, so the radius is ``region_95(nu)`` times the
+    RMS ``sqrt(sum l_i)``. An error that is large in one direction only is a one-dimensional one
+    (1.96 times its RMS, where an isotropic 3-D one is 1.61). 0 for a zero covariance;
+    IdentificationError unless it is a finite square matrix of at most 16 rows."""
+    C = real_array("covariance", covariance, (None, None))
+    if C.shape[0] != C.shape[1] or not 1 <= C.shape[0] <= 16:
+        raise IdentificationError(f"covariance must be a square matrix of 1 to 16 rows, got {C.shape}")
+    trace, square = float(np.trace(C)), float(np.sum(C * C))  # sum l_i, sum l_i^2 (C symmetric)
+    if not trace > 0.0:
+        return 0.0
+    nu = min(max(trace * trace / square, 1.0), float(C.shape[0])) if square > 0.0 else 1.0
+    return float(np.interp(nu, _DIMENSIONS, _REGION_95)) * math.sqrt(trace)
 
 
 _AXIS_COS = math.cos(math.radians(10.0))  # an axis within 10 deg of a frame axis is named after it
