@@ -21,18 +21,19 @@ same samples, each solved after every sample:
 - ``static``: ``PayloadIdentifier`` (N = 5) on the quasi-static samples, the scenario's criteria.
 
 Runs: the scenario's seeds (``--seeds``) as the station builds them, the same seeds with a rigid grasp
-(``rigid``: the finger's and the grip's joints locked; in the station the box sits on stiff but
-compliant grip joints and the finger on a 200 N/m servo, so the outboard body is not quite rigid),
-then ``bias`` (a sensor bias of [0.015, -0.02, 0.01] N m and [0.4, -0.3, 0.5] N) on the first two seeds,
-``fast`` (no rests: ``motion.dwell`` 0, ``max_speed`` 2 rad/s, ``min_duration`` 0.5 s: the issue's
-targets are for motion without rests) on every seed, and ``fast, bias`` on the first two. Times are
-from the motion's start. Errors are those of the outboard body (what the wrench measures and what is
-identified) at the time the estimator says identified; the rotational inertia's is that of the
-inertia about the centre of mass (spectral norm) in % of its largest principal moment; "held box's
-inertia" is the same for the box alone once the gripper's known parameters are subtracted (a
-dynamic tool calibration). "Within targets" is when the estimate enters the targets for good (mass
-<= 0.5 %, centre of mass <= 1 mm, inertia <= 10 %, bias <= 0.05 N and 0.002 N m; the static mode:
-mass and centre of mass only).
+(``rigid``: the finger's and the grip's joints locked; in the station the box sits on stiff but compliant grip
+joints and the finger on a 200 N/m servo, so the outboard body is not quite rigid), then ``bias`` (a sensor
+bias of [0.015, -0.02, 0.01] N m and [0.4, -0.3, 0.5] N) on the first two seeds, ``fast`` (no rests:
+``motion.dwell`` 0, ``max_speed`` 2 rad/s, ``min_duration`` 0.5 s: the issue's targets are for motion without
+rests) on every seed, ``fast, bias`` on the first two, and with each move chosen for the information it adds
+(``exciting``: ``ExcitingPostures`` with ``MoveInformation``, driven by an online dynamic identifier's
+statistic) with rests, without rests, and without rests with the grasp rigid, on every seed. Times are from
+the motion's start. Errors are those of the outboard body (what the wrench measures and what is identified) at
+the time the estimator says identified; the rotational inertia's is that of the inertia about the centre of
+mass (spectral norm) in % of its largest principal moment; "held box's inertia" is the same for the box alone
+once the gripper's known parameters are subtracted (a dynamic tool calibration). "Within targets" is when the
+estimate enters the targets for good (mass <= 0.5 %, centre of mass <= 1 mm, inertia <= 10 %, bias <= 0.05 N
+and 0.002 N m; the static mode: mass and centre of mass only).
 """
 
 from __future__ import annotations
@@ -53,10 +54,12 @@ from pydrake.systems.primitives import LogVectorOutput, ZeroOrderHold
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results_page import publish  # noqa: E402  (bench/results_page.py)
 
+from sustain_drake.experiments.hand_eye import connect_station_wrench  # noqa: E402
+from sustain_drake.experiments.kinesthetic import add_exciting_postures  # noqa: E402
 from sustain_drake.identification import payload_dynamic as dynamic  # noqa: E402
 from sustain_drake.identification.payload import PayloadIdentifier  # noqa: E402
 from sustain_drake.identification.rls import DynamicPayloadRLS  # noqa: E402
-from sustain_drake.loops.payload import payload_formulation  # noqa: E402
+from sustain_drake.loops.payload import add_payload_loop, payload_formulation  # noqa: E402
 from sustain_drake.station import build_station, load_scenario  # noqa: E402
 from sustain_drake.station.scenario import arm_of  # noqa: E402
 from sustain_drake.station.scenario_files import with_seed  # noqa: E402
@@ -70,6 +73,7 @@ BIAS = (0.015, -0.02, 0.01, 0.4, -0.3, 0.5)  # [b_tau (N m); b_f (N)]
 TARGETS = {"mass": 0.5, "com": 1.0, "inertia": 10.0, "bias_f": 0.05, "bias_tau": 0.002}
 ESTIMATORS = ("sustainable", "sustainable, encoders", "RLS", "static")
 RLS_FORGETTING = 0.999
+SEEDS = [11, 1, 2, 3, 4, 5, 6, 7]  # the scenario's seed, then seven more (issue 25: >= 8 seeds)
 GRASP_JOINTS = ("gripper_joint", "tool_slide", "tool_pivot")
 _LOGGED = ("wrench", "sensor_kinematics", "true_outboard_inertia", "true_tool_inertia", "joint_velocities")
 
@@ -82,6 +86,7 @@ class Run:
     fast: bool = False
     rigid: bool = False
     noise_free: bool = False  # the sensor without noise (``coverage`` draws it)
+    excite: bool = False  # each move chosen for the information it adds (``ExcitingPostures``)
 
 
 @dataclass
@@ -102,6 +107,7 @@ def scenario_of(run: Run, duration: float):
     scenario.kinesthetic.enabled = False
     scenario.wrench_sensor.compensate_gripper = False
     scenario.wrench_sensor.bias = list(run.bias)
+    scenario.kinesthetic.mode = "dynamic"  # what the exciting motion's information is of
     if run.fast:
         scenario.motion.dwell, scenario.motion.max_speed, scenario.motion.min_duration = 0.0, 2.0, 0.5
     if run.noise_free:
@@ -158,6 +164,10 @@ def record(run: Run, duration: float) -> dict:
     builder.Connect(station.GetOutputPort("joint_positions"), hold.get_input_port())
     builder.Connect(hold.get_output_port(), encoders.GetInputPort("joint_positions"))
     builder.Connect(station.GetOutputPort("wrench"), encoders.GetInputPort("wrench"))
+    if run.excite:  # the online identifier's statistic chooses the moves
+        watch = add_payload_loop(builder, len(joints), k)
+        connect_station_wrench(builder, station, watch)
+        add_exciting_postures(builder, station, scenario, watch.identifier)
     pose = builder.AddSystem(PoseToVector())
     builder.Connect(station.GetOutputPort("X_WH"), pose.get_input_port())  # K = H in the station
     ports = {name: station.GetOutputPort(name) for name in _LOGGED} | gates | {"X_WK": pose.get_output_port()}
@@ -268,12 +278,23 @@ def _static_phi(solution) -> np.ndarray:
     return np.concatenate([[solution.mass], solution.mass * solution.p_KCm])
 
 
+# The summaries after the one of every run: the issue's targets are for motion without rests.
+GROUPS = (("Motion without rests, babbling", lambda r: r.fast and not r.excite),
+          ("Motion without rests, exciting", lambda r: r.fast and r.excite and not r.rigid),
+          ("Motion without rests, exciting, the grasp rigid", lambda r: r.fast and r.excite and r.rigid),
+          ("With rests, babbling, as built", lambda r: not (r.fast or r.excite or r.rigid)),
+          ("With rests, exciting, as built", lambda r: r.excite and not (r.fast or r.rigid)))
+
+
 def runs_of(seeds: list[int]) -> list[Run]:
     runs = [Run(f"seed {s}", s) for s in seeds]
     runs += [Run(f"rigid, seed {s}", s, rigid=True) for s in seeds]
     runs += [Run(f"bias, seed {s}", s, bias=BIAS) for s in seeds[:2]]
     runs += [Run(f"fast, seed {s}", s, fast=True) for s in seeds]
     runs += [Run(f"fast, bias, seed {s}", s, bias=BIAS, fast=True) for s in seeds[:2]]
+    runs += [Run(f"exciting, seed {s}", s, excite=True) for s in seeds]
+    runs += [Run(f"fast, exciting, seed {s}", s, fast=True, excite=True) for s in seeds]
+    runs += [Run(f"fast, exciting, rigid, seed {s}", s, fast=True, excite=True, rigid=True) for s in seeds]
     return runs
 
 
@@ -323,7 +344,7 @@ def _span(values: list, spec: str) -> str:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seeds", type=int, nargs="+", default=[11, 1, 2, 3, 4], help="babbling seeds (>= 2)")
+    p.add_argument("--seeds", type=int, nargs="+", default=SEEDS, help="babbling seeds (>= 2)")
     p.add_argument("--duration", type=float, default=12.0, help="simulated seconds per run")
     p.add_argument("--results", action="store_true", help="also write the tables on docs/results.md")
     p.add_argument("--coverage", type=int, metavar="DRAWS",
@@ -339,7 +360,7 @@ def main(argv=None) -> int:
         if args.results:
             publish("bench_payload_dynamic_coverage", lines)
         return 0
-    if args.results and (args.seeds != [11, 1, 2, 3, 4] or args.duration != 12.0):
+    if args.results and (args.seeds != SEEDS or args.duration != 12.0):
         raise SystemExit("--results publishes the default seeds and duration only")
     results = []
     for run in runs_of(args.seeds):
@@ -348,11 +369,11 @@ def main(argv=None) -> int:
             outcome = evaluate(copy.copy(streams), estimator)
             results.append((run, estimator, outcome))
             print(row(run, estimator, outcome), flush=True)
-    without_rests = [r for r in results if r[0].fast]
     lines = ["All runs:", ""] + summary(results)
-    count = len(without_rests) // len(ESTIMATORS)
-    lines += ["", f"Motion without rests (the issue's targets; {count} runs):", ""]
-    lines += summary(without_rests) + ["", "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    for title, keep in GROUPS:
+        group = [r for r in results if keep(r[0])]
+        lines += ["", f"{title} ({len(group) // len(ESTIMATORS)} runs):", ""] + summary(group)
+    lines += ["", "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines += [row(run, estimator, o) for run, estimator, o in results]
     print("\n".join(lines))
     if args.results:

@@ -7,15 +7,17 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
+from scipy.spatial.transform import Rotation
 
 from sustain_drake.experiments import kinesthetic
-from sustain_drake.identification import PayloadIdentifier, coordination
+from sustain_drake.identification import IdentificationError, PayloadIdentifier, coordination, payload_dynamic
 from sustain_drake.identification.excitation import information_gains
 from sustain_drake.identification.payload import STANDARD_GRAVITY_W, PostureInformation
+from sustain_drake.identification.payload_dynamic import MoveInformation
 from sustain_drake.station import babbling_joints, babbling_ranges, build_station, load_scenario, sensor_frame
 from sustain_drake.station.scenario import arm_motion
-from sustain_drake.systems.exciting_postures import Clearance, ExcitingPostures
-from sustain_drake.systems.motion_generator import Pace, move_duration
+from sustain_drake.systems.exciting_postures import MOVE_POINTS, Clearance, ExcitingPostures
+from sustain_drake.systems.motion_generator import Pace, move_duration, quintic
 from tests.test_payload import make_wrenches
 
 SCENARIO = Path(__file__).resolve().parents[1] / "diagrams" / "inertia_touch.yaml"
@@ -122,3 +124,73 @@ def test_chosen_moves_keep_the_tool_off_the_pedestal():
     keeps those moves out: identified after two rests."""
     chosen = _identification_time(True, 5.0, seed=20)
     assert chosen is not None and chosen < 4.0
+
+
+def test_a_moves_predicted_kinematics_are_the_plants_along_the_quintic(station_and_chooser):
+    """The dynamic mode's prediction of a candidate move: the sensor's ``[w; alpha; a - g]`` in K at
+    points along the motion generator's quintic, against central differences of the plant's poses."""
+    scenario, station, joints, pace, _, _ = station_and_chooser
+    plant = station.GetSubsystemByName("plant")
+    frame = sensor_frame(station)
+    ranges = babbling_ranges(scenario, joints)
+    chooser = ExcitingPostures(plant, frame, joints, ranges, pace, MoveInformation())
+    q0 = np.array(arm_motion(scenario).initial_posture)
+    q1 = q0 + np.array([0.3, -0.2, 0.25, 0.4, -0.5])
+    T = move_duration(q0, q1, 2.0, 0.5)
+    context = plant.CreateDefaultContext()
+    predicted = chooser._along_move(q0, q1, T, context)
+    g_W = plant.gravity_field().gravity_vector()
+
+    def pose(s):
+        q = plant.GetPositions(context)
+        q[[j.position_start() for j in joints]] = quintic(q0, q1, T, s)[0]
+        plant.SetPositions(context, q)
+        return frame.CalcPoseInWorld(context)
+
+    h = 1e-4
+
+    def w(Xa, Xb):  # the angular velocity that turns Xa into Xb in h, in the world
+        return Rotation.from_matrix(Xb.rotation().matrix() @ Xa.rotation().matrix().T).as_rotvec() / h
+
+    for k, s in enumerate((np.arange(MOVE_POINTS) + 0.5) / MOVE_POINTS * T):
+        X_m, X_0, X_p = pose(s - h), pose(s), pose(s + h)
+        R = X_0.rotation().matrix()
+        w_W = (w(X_m, X_0) + w(X_0, X_p)) / 2.0
+        alpha_W = (w(X_0, X_p) - w(X_m, X_0)) / h
+        a_W = (X_p.translation() - 2.0 * X_0.translation() + X_m.translation()) / h**2
+        expected = np.concatenate([R.T @ w_W, R.T @ alpha_W, R.T @ (a_W - g_W)])
+        assert np.allclose(predicted[k], expected, atol=2e-3 * (1.0 + np.abs(expected).max())), k
+
+
+def test_move_information_is_the_regressors_information_along_the_move():
+    rng = np.random.default_rng(3)
+    moves = [rng.normal(size=(8, 9)), rng.normal(size=(8, 9))]
+    state = payload_dynamic.DynamicPayloadIdentifier().state
+    M, added = payload_dynamic.move_information(state, moves, [2.0, 5.0])
+    assert M.shape == (16, 16) and not M.any()
+    for move, weight, dM in zip(moves, (2.0, 5.0), added, strict=True):
+        rows = [payload_dynamic.build_A(np.zeros(6), k)[:, :16] for k in move]
+        assert np.allclose(dM, weight * sum(A.T @ A for A in rows))
+    with pytest.raises(IdentificationError, match="samples"):
+        payload_dynamic.move_information(state, moves, [1.0])
+
+
+def test_exciting_moves_identify_the_dynamic_payload_sooner_than_the_babbling():
+    """The inertia_touch arm without rests, the dynamic mode: with each move chosen for the
+    information it adds, the verdict comes sooner than with the babbling's random moves."""
+    times = {}
+    for excite in (False, True):
+        scenario = load_scenario(SCENARIO)
+        scenario.kinesthetic.mode, scenario.kinesthetic.excite = "dynamic", excite
+        scenario.wrench_sensor.compensate_gripper = scenario.touch_motion.enabled = False
+        scenario.motion.dwell, scenario.motion.max_speed, scenario.motion.min_duration = 0.0, 2.0, 0.5
+        builder = DiagramBuilder()
+        station = builder.AddSystem(build_station(scenario))
+        handle = kinesthetic.add_to_diagram(builder, station, scenario)
+        simulator = Simulator(builder.Build())
+        simulator.AdvanceTo(2.5)
+        machine = handle.state_machine
+        events = machine.events(machine.GetMyContextFromRoot(simulator.get_context()))
+        assert [e.kind for e in events][:1] == [coordination.CONVERGED], excite
+        times[excite] = events[0].time
+    assert times[True] < 0.8 * times[False], times

@@ -149,7 +149,7 @@ def test_a_slip_while_the_tool_is_unseen_is_found_by_the_wrist_wrench():
     point alone shows no violation. The payload loop watching the wrench detects the slip within
     1 s; the camera is kept and the tool point identified again, where the slipped tool puts it."""
     builder = DiagramBuilder()
-    t_slip = 22.0  # after the payload loop's first identification (about 17 s on this motion)
+    t_slip = 22.0  # after the payload loop's first identification (about 20 s on this motion)
     loop = add_scripted_loop(builder, [ToolSlip(time=t_slip, slide=0.04, pivot=0.35, duration=0.1)],
                              blind=(t_slip - 0.5, t_slip + 3.0), wrench_watch=True)
     simulator = Simulator(builder.Build())

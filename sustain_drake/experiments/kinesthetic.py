@@ -85,7 +85,7 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
         builder.Connect(X_WK, ident.GetInputPort("X_WK"))
     builder.Connect(station.GetOutputPort("joint_velocities"), gate.GetInputPort("joint_velocities"))
     builder.Connect(sm.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
-    if config.excite and not dynamic:
+    if config.excite:
         add_exciting_postures(builder, station, scenario, ident)
     if station.HasInputPort("touch_start"):
         builder.Connect(sm.GetOutputPort("mode"), station.GetInputPort("touch_start"))
@@ -111,20 +111,25 @@ def add_to_diagram(builder: DiagramBuilder, station, scenario, meshcat=None) -> 
 
 
 def add_exciting_postures(builder: DiagramBuilder, station, scenario, ident) -> ExcitingPostures:
-    """The babbling's next posture from the static payload identifier's statistic (``kinesthetic.excite``):
-    each rest gives the quasi-static samples of ``motion.dwell`` less the gate's ``window``. No chosen
+    """The babbling's next posture from the payload identifier's statistic (``kinesthetic.excite``):
+    in the static mode each rest gives the quasi-static samples of ``motion.dwell`` less the gate's
+    ``window``; in the dynamic mode every sample of the move counts (``MoveInformation``). No chosen
     move brings the held tool within ``EXCITE_CLEARANCE`` of anything it could touch (the table, the
     arm's pedestal): its samples would then be contact, not weight."""
     m, config = arm_motion(scenario), scenario.kinesthetic
     plant = station.GetSubsystemByName("plant")
     joints = babbling_joints(station, scenario)
-    rest_samples = max(m.dwell - config.quasi_static.window, config.period) / config.period
-    information = payload.PostureInformation(ident.formulation.gravity_W, rest_samples)
+    if config.mode == "dynamic":
+        information = payload_dynamic.MoveInformation(config.dynamic.torque_length)
+    else:
+        rest_samples = max(m.dwell - config.quasi_static.window, config.period) / config.period
+        information = payload.PostureInformation(ident.formulation.gravity_W, rest_samples)
     tool = frozenset(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("tool")))
     clearance = Clearance(station, tool, EXCITE_CLEARANCE)
     chooser = builder.AddSystem(ExcitingPostures(
         plant, sensor_frame(station), joints, babbling_ranges(scenario, joints),
-        Pace(m.max_speed, m.min_duration, m.dwell), information, clearance, seed=m.seed))  # fmt: skip
+        Pace(m.max_speed, m.min_duration, m.dwell), information, clearance, seed=m.seed,
+        rate=1.0 / config.period))  # fmt: skip
     chooser.set_name("exciting_postures")
     builder.Connect(ident.GetOutputPort("statistic"), chooser.GetInputPort("statistic"))
     builder.Connect(station.GetOutputPort("joint_positions"), chooser.GetInputPort("joint_positions"))

@@ -305,6 +305,46 @@ def _empty_solution(reason: str, num_samples: int, eigen=None) -> DynamicPayload
                                   num_samples)  # fmt: skip
 
 
+def move_information(state: np.ndarray, moves, samples, torque_length: float = DEFAULT_TORQUE_LENGTH):
+    """The information ``M`` the statistic holds on the unknowns ``[phi; b]`` (16) and, for each
+    candidate move, the information ``dM`` its samples add (``identification.excitation``; issues 25
+    and 26): ``moves[i]`` is the sensor's kinematics ``[w; alpha; a - g]`` in K (m x 9) at points
+    along the move, each standing for ``samples[i]`` samples. The unknowns' columns of ``A_t`` are the
+    regressor and the bias's identity, which the kinematics alone give; the wrench column is the
+    measurement's, not an unknown's. ``state`` is a ``DynamicPayloadIdentifier``'s state
+    ``[S (289) | n_eff | count]``. IdentificationError unless ``state`` is a real vector of 291,
+    every move a finite (m x 9) array and ``samples`` one number > 0 per move."""
+    n2 = N_UNKNOWNS * N_UNKNOWNS
+    state = real_array("state", state, (n2 + 2,))
+    samples = real_array("samples", samples, (None,))
+    if samples.size != len(moves) or not np.all(samples > 0.0):
+        raise IdentificationError(f"samples must be one number > 0 per move ({len(moves)}), got {samples}")
+    inverse_length = 1.0 / checked_torque_length(torque_length)
+    unknowns = slice(0, N_UNKNOWNS - 1)
+    added, A = [], _fresh_A(inverse_length)
+    for move, weight in zip(moves, samples.tolist(), strict=True):
+        dM = np.zeros((N_UNKNOWNS - 1, N_UNKNOWNS - 1))
+        for k in real_array("moves[i]", move, (None, KINEMATICS)).tolist():
+            Phi = _build_A(np.zeros(6), k, A, inverse_length)[:, unknowns]
+            dM += Phi.T @ Phi
+        added.append(weight * dM)
+    return state[:n2].reshape(N_UNKNOWNS, N_UNKNOWNS)[unknowns, unknowns].copy(), added
+
+
+@dataclass(frozen=True)
+class MoveInformation:
+    """``move_information`` as a callable ``(state, moves, samples) -> (M, [dM])`` for
+    ``systems.ExcitingPostures``, which gives it the sensor's kinematics along each candidate move
+    (``along_move``) with the samples each point stands for."""
+
+    torque_length: float = DEFAULT_TORQUE_LENGTH
+    num_unknowns: ClassVar[int] = N_UNKNOWNS
+    along_move: ClassVar[bool] = True
+
+    def __call__(self, state, moves, samples):
+        return move_information(state, moves, samples, self.torque_length)
+
+
 class DynamicPayloadIdentifier(FormulationIdentifier):
     """The sustainable identifier with the dynamic payload formulation (module docstring).
 

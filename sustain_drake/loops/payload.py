@@ -79,8 +79,8 @@ class KinestheticConfig:
     min_touch_force: float = 2.0
     # N: touch points are scored against the true contacts of at least this force
     eval_min_force: float = 5.0
-    # static mode: each babbling move goes to the posture, of 16 drawn, whose rest adds the most
-    # information per second on what the statistic determines least (ExcitingPostures)
+    # each babbling move goes to the posture, of 16 drawn, whose rest (static mode) or move and rest
+    # (dynamic) add the most information per second on what the statistic determines least
     excite: bool = True
 
 

@@ -7,16 +7,27 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
+from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
 from sustain_drake.identification.excitation import ranked_candidates
-from sustain_drake.systems.motion_generator import Pace, move_duration, shortest_move_reach
+from sustain_drake.identification.payload_dynamic import sensor_kinematics
+from sustain_drake.systems.motion_generator import (
+    Pace,
+    move_duration,
+    quintic,
+    quintic_acceleration,
+    shortest_move_reach,
+)
 
 # Postures drawn per choice: half the babbling's own, half the shortest moves'.
 NUM_CANDIDATES = 16
 # rad: a chosen move's path is checked every this much of its largest joint's travel (a point 0.4 m
 # out moves 2 cm in it: the clearance's margin).
 PATH_CHECK_STEP = 0.05
+# Points at which a move's kinematics are predicted (the midpoints of as many equal parts of it): a
+# quintic move's acceleration changes sign twice, so 8 points follow it to a few per cent.
+MOVE_POINTS = 8
 
 
 class Clearance(NamedTuple):
@@ -51,7 +62,11 @@ class ExcitingPostures(LeafSystem):
     of the samples at the posture (``information(statistic, [R_WK])`` gives the statistic's ``M``
     and each candidate's ``dM``, and ``information.num_unknowns`` is the statistic's N: e.g.
     ``payload.PostureInformation``) over the move's duration at
-    the babbling's ``pace`` plus its rest (``pace.dwell``).
+    the babbling's ``pace`` plus its rest (``pace.dwell``). An ``information`` whose ``along_move``
+    is true (``payload_dynamic.MoveInformation``: samples during the motion count) is given instead
+    the sensor's kinematics ``[w; alpha; a - g]`` in K at ``MOVE_POINTS`` points along each
+    candidate's quintic move from rest to rest (the motion generator's), each standing for the
+    samples at ``rate`` Hz of its part of the move: ``information(statistic, moves, samples)``.
 
     With a ``clearance``, the best candidate whose move keeps it (its straight joint-space path,
     which the motion generator's moves between rests follow) is chosen; when none does, ``goal`` is
@@ -65,7 +80,7 @@ class ExcitingPostures(LeafSystem):
     """
 
     def __init__(self, plant, frame, joints, ranges: tuple, pace: Pace, information: Callable,
-                 clearance: Clearance | None = None, seed: int = 0):  # fmt: skip
+                 clearance: Clearance | None = None, seed: int = 0, rate: float = 100.0):  # fmt: skip
         super().__init__()
         lower, upper = (np.asarray(r, dtype=float) for r in ranges)
         n = len(joints)
@@ -73,8 +88,11 @@ class ExcitingPostures(LeafSystem):
             raise ValueError(f"ranges must be two length-{n} vectors with lower <= upper")
         if not (pace.max_speed > 0 and pace.min_duration > 0 and pace.dwell >= 0):
             raise ValueError("pace.max_speed and pace.min_duration must be > 0, pace.dwell >= 0")
-        self._plant, self._frame = plant, frame
+        if not rate > 0:
+            raise ValueError(f"rate must be > 0 Hz, got {rate}")
+        self._plant, self._frame, self._rate = plant, frame, float(rate)
         self._positions = [j.position_start() for j in joints]
+        self._velocities = [j.velocity_start() for j in joints]
         self._lower, self._upper, self._pace = lower, upper, pace
         self._information, self._clearance, self._seed = information, clearance, int(seed)
         self._k = NUM_CANDIDATES
@@ -105,17 +123,46 @@ class ExcitingPostures(LeafSystem):
             self._plant.SetPositions(plant_context, q)
             return self._frame.CalcPoseInWorld(plant_context)
 
-        M, added = self._information(self._statistic.Eval(context),
-                                     [X_WK(goal).rotation().matrix() for goal in candidates])
         pace = self._pace
-        durations = [move_duration(q_now, goal, pace.max_speed, pace.min_duration) + pace.dwell
-                     for goal in candidates]
+        moves = [move_duration(q_now, goal, pace.max_speed, pace.min_duration) for goal in candidates]
+        durations = [move + pace.dwell for move in moves]
+        if getattr(self._information, "along_move", False):
+            along = [self._along_move(q_now, goal, T, plant_context)
+                     for goal, T in zip(candidates, moves, strict=True)]
+            samples = [T * self._rate / MOVE_POINTS for T in moves]
+            M, added = self._information(self._statistic.Eval(context), along, samples)
+        else:
+            M, added = self._information(self._statistic.Eval(context),
+                                         [X_WK(goal).rotation().matrix() for goal in candidates])
         # The best first; with a clearance, the best whose path keeps it.
         for i in ranked_candidates(M, added, durations):
             if root is None or self._keeps_clear(q_now, candidates[i], X_WK, plant_context):
                 output.SetFromVector(candidates[i])
                 return
         output.SetFromVector(np.full(n, np.nan))  # none: the motion generator's own random goal
+
+    def _along_move(self, q_now, goal, duration: float, plant_context) -> np.ndarray:
+        """The sensor's kinematics ``[w; alpha; a - g]`` in K (``MOVE_POINTS`` x 9) at the midpoints of
+        ``MOVE_POINTS`` equal parts of the quintic move from ``q_now`` to ``goal`` in ``duration``."""
+        plant, frame, world, kV = self._plant, self._frame, self._plant.world_frame(), JacobianWrtVariable.kV
+        q, v = plant.GetPositions(plant_context), np.zeros(plant.num_velocities())
+        g_W, p_KoK = plant.gravity_field().gravity_vector(), np.zeros(3)
+        rows = []
+        for s in (np.arange(MOVE_POINTS) + 0.5) / MOVE_POINTS * duration:
+            q[self._positions], v_arm = quintic(q_now, goal, duration, s)
+            v[:] = 0.0
+            v[self._velocities] = v_arm
+            vdot = np.zeros_like(v)
+            vdot[self._velocities] = quintic_acceleration(q_now, goal, duration, s)
+            plant.SetPositions(plant_context, q)
+            plant.SetVelocities(plant_context, v)
+            J = plant.CalcJacobianSpatialVelocity(plant_context, kV, frame, p_KoK, world, world)
+            bias = plant.CalcBiasSpatialAcceleration(plant_context, kV, frame, p_KoK, world, world)
+            V, A = J @ v, J @ vdot + bias.get_coeffs()
+            R_WK = frame.CalcPoseInWorld(plant_context).rotation().matrix()
+            rows.append(sensor_kinematics(R_WK, V[:3], A[:3], A[3:], g_W))
+        plant.SetVelocities(plant_context, np.zeros(plant.num_velocities()))
+        return np.array(rows)
 
     def _keeps_clear(self, q_now, goal, X_WK, plant_context) -> bool:
         """Whether the straight joint-space path from ``q_now`` to ``goal`` keeps the clearance."""

@@ -26,13 +26,26 @@ def quintic(q0: np.ndarray, q1: np.ndarray, duration: float, s: float, v0=None):
     ends and velocity continuous, so moves chain smoothly and requests never jerk the arm."""
     if duration <= 0:
         return q1.copy(), np.zeros_like(q1)
-    x = min(max(s / duration, 0.0), 1.0)
-    delta = q1 - q0
-    V = np.zeros_like(q0) if v0 is None else np.asarray(v0) * duration
-    c3, c4, c5 = 10 * delta - 6 * V, -15 * delta + 8 * V, 6 * delta - 3 * V
+    x, V, c3, c4, c5 = _quintic_terms(q0, q1, duration, s, v0)
     q = q0 + V * x + c3 * x**3 + c4 * x**4 + c5 * x**5
     v = (V + 3 * c3 * x**2 + 4 * c4 * x**3 + 5 * c5 * x**4) / duration
     return q, v
+
+
+def quintic_acceleration(q0: np.ndarray, q1: np.ndarray, duration: float, s: float, v0=None) -> np.ndarray:
+    """The acceleration (rad/s^2) of ``quintic``'s move at time ``s`` into it."""
+    if duration <= 0:
+        return np.zeros_like(q1)
+    x, _, c3, c4, c5 = _quintic_terms(q0, q1, duration, s, v0)
+    return (6 * c3 * x + 12 * c4 * x**2 + 20 * c5 * x**3) / duration**2
+
+
+def _quintic_terms(q0, q1, duration: float, s: float, v0):
+    """``quintic``'s normalised time and polynomial coefficients."""
+    x = min(max(s / duration, 0.0), 1.0)
+    delta = q1 - q0
+    V = np.zeros_like(q0) if v0 is None else np.asarray(v0) * duration
+    return x, V, 10 * delta - 6 * V, -15 * delta + 8 * V, 6 * delta - 3 * V
 
 
 # The peak speed of a quintic move is 15/8 of its mean speed.
