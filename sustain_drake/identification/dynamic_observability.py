@@ -63,6 +63,7 @@ COM_ACCURACY = 0.001  # m
 INERTIA_ACCURACY = 0.1  # of the largest principal moment about the centre of mass
 BIAS_TORQUE_ACCURACY = 0.002  # N m, each component
 BIAS_FORCE_ACCURACY = 0.05  # N, each component
+_SCALAR_REGION_95 = region_95(1)  # 1.960: the mass's 95 % radius over its sd
 
 # The 3 x 3 inertia matrix's entries in the order of phi[4:10]: xx, yy, zz, xy, xz, yz.
 _SIX = ([0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2])
@@ -142,7 +143,7 @@ def payload_regions_95(covariance: np.ndarray, theta: np.ndarray) -> dict[str, f
     I_Cm[_SIX] = phi[4:10]
     I_Cm = np.triu(I_Cm) + np.triu(I_Cm, 1).T + (np.outer(h, h) - float(h @ h) * np.eye(3)) / mass
     largest = float(np.linalg.eigvalsh(I_Cm)[-1])
-    mass_95 = region_95(1) * math.sqrt(max(var_mass, 0.0))
+    mass_95 = _SCALAR_REGION_95 * math.sqrt(max(var_mass, 0.0))
     return {"mass": mass_95 / (MASS_ACCURACY * mass), "com": radius_95(C_com) / COM_ACCURACY,
             "inertia": radius_95(C_inertia) / (INERTIA_ACCURACY * largest) if largest > 0.0 else math.inf,
             "bias_tau": radius_95(covariance[10:13, 10:13]) / BIAS_TORQUE_ACCURACY,

@@ -136,7 +136,7 @@ def radius_95(covariance) -> float:
     trace, square = float(np.trace(C)), float(np.sum(C * C))  # sum l_i, sum l_i^2 (C symmetric)
     if not trace > 0.0:
         return 0.0
-    nu = min(max(trace * trace / square, 1.0), float(C.shape[0])) if square > 0.0 else 1.0
+    nu = min(max(trace * trace / square, 1.0), float(C.shape[0]))  # square > 0 as trace > 0
     return float(np.interp(nu, _DIMENSIONS, _REGION_95)) * math.sqrt(trace)
 
 

@@ -74,7 +74,8 @@ class ExcitingPostures(LeafSystem):
 
     Computed when evaluated, with no state: a ``MotionGenerator`` evaluates its ``goal`` input once
     per babbling move, so the kinematics of the candidates (``frame``'s orientation in the world,
-    from ``plant``) cost a few milliseconds per move. The arm's other joints (and every other body
+    from ``plant``) cost about 1 ms per move, or about 12 ms along the moves (``along_move``: 16 x 8
+    Jacobians). The arm's other joints (and every other body
     of ``plant``) stay at their default positions, which must not move ``frame`` relative to the
     arm's last joint.
     """
@@ -147,12 +148,10 @@ class ExcitingPostures(LeafSystem):
         plant, frame, world, kV = self._plant, self._frame, self._plant.world_frame(), JacobianWrtVariable.kV
         q, v = plant.GetPositions(plant_context), np.zeros(plant.num_velocities())
         g_W, p_KoK = plant.gravity_field().gravity_vector(), np.zeros(3)
-        rows = []
+        vdot, rows = np.zeros_like(v), []
         for s in (np.arange(MOVE_POINTS) + 0.5) / MOVE_POINTS * duration:
-            q[self._positions], v_arm = quintic(q_now, goal, duration, s)
-            v[:] = 0.0
-            v[self._velocities] = v_arm
-            vdot = np.zeros_like(v)
+            q_arm, v_arm = quintic(q_now, goal, duration, s)
+            q[self._positions], v[self._velocities] = q_arm, v_arm  # the other joints at rest
             vdot[self._velocities] = quintic_acceleration(q_now, goal, duration, s)
             plant.SetPositions(plant_context, q)
             plant.SetVelocities(plant_context, v)
