@@ -473,8 +473,7 @@ class EyeToHandIdentifier(FormulationIdentifier):
         """The solution without refinement: the eigen-solve, the SO(3) projection, the verdict."""
         core = self._core
         n = core.num_samples
-        T = _conditioning_transform(core._S, self._T) if n > 0 else None
-        eigen = core.eigen(T, self.criteria.min_gap_ratio) if n > 0 else None
+        eigen = core.eigen(_conditioning_transform(core._S, self._T)) if n > 0 else None
         if eigen is None:
             reason = "no samples" if n == 0 else "statistic is not finite (overflow)"
             return EyeToHandSolution(None, 0.0, math.inf, math.inf, None, None,

@@ -399,7 +399,7 @@ def _judge_eye_to_hand(criteria: ConvergenceCriteria, S: np.ndarray, weight: flo
     if eigen is None or num_samples < criteria.min_samples or not weight > 0.0:
         return verdict
     reason = _units_problem(S, weight) or _rotation_problem(S, weight)
-    determined = eigen.num_null < 2 and eigen.gap_ratio_at_least(criteria.min_gap_ratio)  # (b)
+    determined = eigen.num_null < 2 and eigen.gap_ratio >= criteria.min_gap_ratio  # (b)
     if reason is None and tls is not None and determined:
         x, R, expected_rms = tls
         reason = _frame_problem(float(x[15]), expected_rms, criteria)

@@ -417,7 +417,7 @@ class DynamicPayloadIdentifier(FormulationIdentifier):
         weight = core.weight or math.nan
         diag = [s_jj / weight for s_jj in core.S_view.diagonal().tolist()]
         T = np.diag([1.0 / math.sqrt(c_jj if c_jj > 0.0 else 1.0) for c_jj in diag])
-        eigen = core.eigen(T, self.criteria.min_gap_ratio)
+        eigen = core.eigen(T)
         if eigen is None:
             return _empty_solution("statistic is not finite (overflow)", n)
         direction = eigen.direction

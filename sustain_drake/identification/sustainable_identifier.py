@@ -44,15 +44,10 @@ from sustain_drake.identification.errors import (
     real_number,
     to_float_array,
 )
-from sustain_drake.identification.warm_eigen import WarmEigen
 
 # Eigenvalues below this fraction of lambda_1 are taken as exactly zero (round-off of a 16 x 16
 # symmetric eigen-solver in float64 is ~1e-16 lambda_1).
 NULL_EIGENVALUE_RTOL = 1e-12
-
-# The smallest N whose solves start from the last one (``warm_eigen``): at N = 5 (the payload) the
-# full dsyev costs less than the certified solve's factorisations.
-WARM_MIN_UNKNOWNS = 8
 
 # The largest N a SustainableIdentifier accepts (its state is N^2 + 2 floats; the formulations
 # have 16 and 5).
@@ -111,6 +106,7 @@ class Verdict:
         return "converged" if self.converged else f"not converged: {self.reason}"
 
 
+@dataclass(frozen=True, slots=True)
 class EigenSolution:
     """The eigen-decomposition of the (conditioned) statistic, Eqs. (7)-(12).
 
@@ -121,52 +117,16 @@ class EigenSolution:
         num_null: how many eigenvalues are zero to round-off (>= 2 means the motion was not
             rich enough: the null space is more than one-dimensional). It is 1 both when only
             ``lambda_N`` is zero and when none is; the count is exact when it is 2 or more.
-
-    A solve certified by ``warm_eigen`` (``certified``) computes only ``lambda_N`` and ``v_N``, and
-    proves ``lambda_{N-1} / lambda_N > min_gap_ratio``: ``eigenvalues``, ``lambda_N_minus_1`` and
-    ``gap_ratio`` are then computed on first read (``dsyev`` without vectors on the kept matrix),
-    and ``gap_ratio_at_least`` answers from the proof. Read-only.
     """
 
-    __slots__ = ("_eigenvalues", "v_N", "direction", "_num_null", "_lambda_N", "_matrix", "_scale",
-                 "_gap_bound")  # fmt: skip
-
-    def __init__(self, eigenvalues: np.ndarray, v_N: np.ndarray, direction: np.ndarray, num_null: int):
-        self._eigenvalues, self.v_N, self.direction, self._num_null = eigenvalues, v_N, direction, num_null
-        self._lambda_N = float(eigenvalues[-1])
-        self._matrix, self._scale, self._gap_bound = None, 0.0, 0.0
-
-    @classmethod
-    def certified(cls, lambda_N: float, v_N: np.ndarray, direction: np.ndarray, matrix: np.ndarray,
-                  scale: float, gap_bound: float) -> EigenSolution:
-        """A solution of ``lambda_N`` and ``v_N`` alone, with ``lambda_{N-1} / lambda_N > gap_bound``
-        proven; the eigenvalues are ``scale`` times those of ``matrix`` (kept, not copied)."""
-        eigen = cls.__new__(cls)
-        eigen._eigenvalues, eigen.v_N, eigen.direction, eigen._num_null = None, v_N, direction, 1
-        eigen._lambda_N, eigen._matrix, eigen._scale, eigen._gap_bound = lambda_N, matrix, scale, gap_bound
-        return eigen
-
-    @property
-    def certified_gap(self) -> float:
-        """The proven lower bound of ``gap_ratio`` (0 for a full eigen-solve, which knows it exactly)."""
-        return self._gap_bound
-
-    @property
-    def eigenvalues(self) -> np.ndarray:
-        if self._eigenvalues is None:
-            w, _, info = lapack.dsyev(self._matrix.T, compute_v=0)
-            w = np.maximum(w[::-1] * self._scale, 0.0)  # descending, round-off below zero clipped
-            w[-1] = self._lambda_N  # the certified solve's own, within dsyev's round-off of it
-            self._eigenvalues = w
-        return self._eigenvalues
-
-    @property
-    def num_null(self) -> int:
-        return self._num_null
+    eigenvalues: np.ndarray
+    v_N: np.ndarray
+    direction: np.ndarray
+    num_null: int
 
     @property
     def lambda_N(self) -> float:
-        return self._lambda_N
+        return float(self.eigenvalues[-1])
 
     @property
     def lambda_N_minus_1(self) -> float:
@@ -175,20 +135,12 @@ class EigenSolution:
     @property
     def gap_ratio(self) -> float:
         """``lambda_{N-1} / lambda_N`` (inf when ``lambda_N`` is zero and ``lambda_{N-1}`` is not)."""
-        if self._num_null >= 2:
+        if self.num_null >= 2:
             return 1.0
         lambda_N_minus_1, lambda_N = self.eigenvalues[-2:].tolist()
         if lambda_N <= 0.0:
             return math.inf
         return lambda_N_minus_1 / lambda_N
-
-    def gap_ratio_at_least(self, ratio: float) -> bool:
-        """``gap_ratio >= ratio``, from the certificate when it proves it (no eigenvalues computed)."""
-        return self._gap_bound >= ratio or not self.gap_ratio < ratio
-
-    def __repr__(self) -> str:
-        return (f"EigenSolution(lambda_N={self._lambda_N!r}, num_null={self._num_null}, "
-                f"certified_gap={self._gap_bound!r})")
 
 
 def judge(
@@ -226,7 +178,7 @@ def _judge(criteria, num_samples, eigen, expected_rms, constraint_problem, ssd, 
             f"motion not rich enough: the null space is {eigen.num_null}-dimensional "
             "(e.g. pure translation of the hand, or too few distinct samples)",
         )
-    if not eigen.gap_ratio_at_least(criteria.min_gap_ratio):
+    if eigen.gap_ratio < criteria.min_gap_ratio:
         return Verdict(
             False,
             f"eigenvalue gap too small: lambda_N-1/lambda_N = {eigen.gap_ratio:.3g} < "
@@ -289,10 +241,6 @@ class SustainableIdentifier:
         self._AtA = self._increment[:n2].reshape(self._N, self._N)
         self._TtS = np.empty((self._N, self._N))  # scratch for T^T S
         self._revision = 0
-        # The warm start of the certified solve (``warm_eigen``): the last solve's conditioned v_N, a
-        # cache rather than state (any start gives the same solution to round-off, or a full solve).
-        self._warm = WarmEigen(self._N) if self._N >= WARM_MIN_UNKNOWNS else None
-        self._v_warm: np.ndarray | None = None
 
     # ---- state ----------------------------------------------------------------------------
     @property
@@ -416,15 +364,9 @@ class SustainableIdentifier:
         self._revision += 1
 
     # ---- solving --------------------------------------------------------------------------
-    def eigen(self, T: np.ndarray | None = None, min_gap_ratio: float | None = None) -> EigenSolution | None:
+    def eigen(self, T: np.ndarray | None = None) -> EigenSolution | None:
         """Eigen-decomposes ``C' = T^T C T`` (``T``, the conditioning transform with
         ``x = T x'``, defaults to the identity).
-
-        With ``min_gap_ratio`` (a formulation's criterion (b)), a conditioned statistic whose
-        ``lambda_{N-1} / lambda_N`` exceeds it is solved from the last solve's ``v_N``, certified
-        (``warm_eigen``: ``lambda_N`` and ``v_N`` to ``dsyev``'s round-off, the other eigenvalues
-        computed when read), else by the full ``dsyev``. N below ``WARM_MIN_UNKNOWNS`` always
-        takes the full solve.
 
         Returns None before any sample, or when the statistic is not finite (overflow). Raises
         IdentificationError unless ``T`` is None or a real N x N matrix, finite when the statistic
@@ -435,13 +377,12 @@ class SustainableIdentifier:
         n = float(self._state[self._n_index])
         if n <= 0.0:
             return None
-        eigen = self._eigen(n, T, min_gap_ratio)
+        eigen = self._eigen(n, T)
         if eigen is None and T is not None and np.isfinite(self._S).all():
             check_finite("T", T)
         return eigen
 
-    def _eigen(self, n: float, T: np.ndarray | None,
-               min_gap_ratio: float | None = None) -> EigenSolution | None:  # fmt: skip
+    def _eigen(self, n: float, T: np.ndarray | None) -> EigenSolution | None:
         """``eigen`` after its checks, with ``n > 0`` the weight."""
         if T is None:
             C, overwrite = self._S, 0
@@ -451,14 +392,6 @@ class SustainableIdentifier:
             except ValueError:  # T not C-contiguous float64 (a view): the general product
                 C = T.T @ self._S @ T
             overwrite = 1
-        if self._v_warm is not None and min_gap_ratio is not None:
-            matrix = C if overwrite else C.copy()  # kept by the solution for its other eigenvalues
-            warm = self._warm.smallest(matrix, self._v_warm, min_gap_ratio)
-            if warm is not None:
-                theta, v_N = warm
-                self._v_warm = v_N
-                direction = v_N if T is None else np.dot(T, v_N)
-                return EigenSolution.certified(theta / n, v_N, direction, matrix, 1.0 / n, min_gap_ratio)
         # C is symmetric PSD, so a symmetric eigen-solver is the right tool, not a general SVD.
         # (LAPACK's partial solvers dsyevr/dsyevx for the few smallest are no faster at N = 16.)
         # C is symmetric, so its transpose is the same matrix in Fortran order: no copy for LAPACK.
@@ -476,8 +409,6 @@ class SustainableIdentifier:
             w = np.maximum(w, 0.0)  # clip round-off below zero (C is PSD)
             lambda_1, lambda_N_minus_1 = max(lambda_1, 0.0), max(lambda_N_minus_1, 0.0)
         v_N = V[:, 0]
-        if self._warm is not None:
-            self._v_warm = v_N
         tol = NULL_EIGENVALUE_RTOL * lambda_1
         num_null = 1 if lambda_N_minus_1 > tol else int((w <= tol).sum())
         direction = v_N if T is None else np.dot(T, v_N)
