@@ -1,5 +1,6 @@
 """Drift-free points of tracked features (perception.point_refinement) on synthetic images."""
 
+import dataclasses
 import warnings
 
 import cv2
@@ -8,6 +9,7 @@ import pytest
 
 from sustain_drake.perception.optical_flow import PinholeIntrinsics
 from sustain_drake.perception.point_refinement import (
+    SADDLE_SYMMETRY,
     RefinementParams,
     _row_nanmedian,
     central_symmetry,
@@ -323,3 +325,27 @@ def test_row_nanmedian_is_numpys_nanmedian_bit_for_bit(rows):
         warnings.simplefilter("ignore", RuntimeWarning)  # numpy's "All-NaN slice encountered"
         expected = np.nanmedian(window, axis=1)
     assert _row_nanmedian(window).tobytes() == expected.tobytes()
+
+
+def test_a_saddle_seen_obliquely_is_symmetric_and_a_random_textures_points_are_not():
+    # A checker corner on a face turned by 50 deg (foreshortened to cos 50 = 0.64 across, and
+    # sheared) stays centrally symmetric about its crossing: an affine image of a saddle is a saddle.
+    h, w, scale = K.height * 8, K.width * 8, 8
+    v, u = np.mgrid[0:h, 0:w]
+    x, y = (u + 0.5) / scale - 0.5 - SADDLE[0], (v + 0.5) / scale - 0.5 - SADDLE[1]
+    fu, fv = x / 0.64 + 0.3 * y, y  # image to face coordinates
+    light = (np.floor(fu / 9.0) + np.floor(fv / 9.0)) % 2 == 0
+    oblique = cv2.resize(np.where(light, 230, 20).astype(np.uint8), (K.width, K.height),
+                         interpolation=cv2.INTER_AREA)
+    assert central_symmetry(oblique, np.array([SADDLE]), 3)[0] >= SADDLE_SYMMETRY
+    # A fine random texture: the refined corners that pass the old 0.5 (a speckle's blob or saddle)
+    # are refused at SADDLE_SYMMETRY, so their tracks are anchored on their patch instead.
+    rng = np.random.default_rng(3)
+    speckle = cv2.GaussianBlur(rng.uniform(0, 255, (K.height, K.width)).astype(np.float32), (0, 0), 1.2)
+    speckle = cv2.normalize(speckle, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    corners = cv2.goodFeaturesToTrack(speckle, 200, 0.01, 5, blockSize=7).reshape(-1, 2).astype(float)
+    loose = RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3)
+    refined, kept_loose = refine_pixels(speckle, corners, loose)
+    assert kept_loose.sum() >= 5  # the old threshold takes several of them as corners
+    _, kept = refine_pixels(speckle, corners, dataclasses.replace(loose, min_symmetry=SADDLE_SYMMETRY))
+    assert kept.sum() <= 0.2 * kept_loose.sum()

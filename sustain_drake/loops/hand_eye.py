@@ -16,7 +16,7 @@ from sustain_drake.loops.identify_observe import CoordinationConfig, connect_ide
 from sustain_drake.loops.payload import KinestheticConfig, PayloadLoop
 from sustain_drake.loops.pixel_scale import RAD_PER_PX_MEASURED, pixel_scale, scaled
 from sustain_drake.perception.camera_motion import CameraMotionParams
-from sustain_drake.perception.point_refinement import RefinementParams
+from sustain_drake.perception.point_refinement import SADDLE_SYMMETRY, RefinementParams
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers, FeatureRefiner
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
@@ -155,7 +155,7 @@ def hand_eye_parts(config: HandEyeConfig) -> HandEyeParts:
     # puts a corner ~2.5 px inside it), then points anchored on a 17 x 17 patch where their track
     # began; the depth on the face's fitted plane (docs/hand_eye.md, "The points")
     refinement = RefinementParams(corner_window_px=4, max_shift_px=4.0, symmetry_window_px=3,
-                                  depth_plane=True, anchor_window_px=8)
+                                  min_symmetry=SADDLE_SYMMETRY, depth_plane=True, anchor_window_px=8)
     return HandEyeParts(config, coordination, candidates, refinement,
                         CameraMotionConfig(enabled=config.camera_motion))
 

@@ -82,6 +82,14 @@ class RefinementParams:
             raise ValueError(f"max_shift_px, surface_tolerance and min_fraction must be positive ({self})")
 
 
+# Least central symmetry of a point kept as a corner under any view. A sub-pixel point moves, when
+# the blur, the pixel footprint or the anti-aliasing about it change with the view, by the gradient
+# of that change applied to the window's antisymmetric part A; central_symmetry is
+# (|S|^2 - |A|^2) / (|S|^2 + |A|^2) with S the symmetric part, so 0.9 keeps |A| <= 0.23 |S| (a
+# printed saddle: perspective and shading across the window) and turns away the saddles and blobs
+# of a random texture, symmetric at 0.5 (|A| = 0.58 |S|) but moving with the view.
+SADDLE_SYMMETRY = 0.9
+
 _CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01)
 
 
