@@ -46,14 +46,16 @@ from sustain_drake.loops.hand_eye import (
 )
 from sustain_drake.loops.inspection import add_estimate_overlay, add_inspection
 from sustain_drake.loops.payload import PayloadLoop, add_payload_loop
-from sustain_drake.station import ScenarioError, camera_info
+from sustain_drake.station import ScenarioError, babbling_joints, camera_info, hand_frame
 from sustain_drake.station.scenario import HeadMove, ToolSlip, arm_motion, arm_of, timeline
 from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.depth_noise import DepthNoiseModel
+from sustain_drake.systems.exciting_postures import HandKinematics
 from sustain_drake.systems.ground_truth import PoseToVector
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
+from sustain_drake.systems.motion_generator import Pace
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
 
 # Logged signals: (system key, output port).
@@ -89,9 +91,13 @@ def build_loop(builder, station, scenario, parts: HandEyeParts | None = None):
     if not (station.HasOutputPort("color_image") and station.HasOutputPort("depth_image")):
         raise ScenarioError("hand_eye needs the camera's color and depth images (camera.rgb, camera.depth)")
     try:
+        motion = arm_motion(scenario)
+        kinematics = None if not config.excite else HandKinematics(
+            station.GetSubsystemByName("plant"), hand_frame(station), babbling_joints(station, scenario),
+            Pace(motion.max_speed, motion.min_duration, motion.dwell))  # fmt: skip
         loop = add_hand_eye_loop(builder, camera_info(scenario), len(arm_of(scenario).joints),
-                                 scenario.camera.fps, settings, perception,
-                                 arm_motion(scenario).joint_ranges, scenario.motion.seed)  # fmt: skip
+                                 scenario.camera.fps, settings, perception, motion.joint_ranges,
+                                 scenario.motion.seed, kinematics=kinematics)  # fmt: skip
     except ValueError as e:
         raise ScenarioError(f"hand_eye: {e}") from None
     candidates, machine = loop.candidates, loop.state_machine

@@ -167,6 +167,47 @@ def build_A(p_CP: np.ndarray, R_WH: np.ndarray, p_WH: np.ndarray, out: np.ndarra
     return A
 
 
+def predicted_points(estimate: EyeToHandEstimate, X_WH) -> np.ndarray:
+    """Eq. (30) solved for the point: ``p_CP = R_WC^T (R_WH p_HP + p_WH - p_WC)`` (k x 3, m) at each
+    hand pose of ``X_WH`` (k x 4 x 4) under ``estimate``. IdentificationError unless ``estimate`` is
+    an EyeToHandEstimate and ``X_WH`` real 4 x 4 matrices."""
+    estimate = instance("estimate", estimate, EyeToHandEstimate, "an EyeToHandEstimate")
+    X_WH = real_array("X_WH", X_WH, (None, 4, 4), what="hand poses (k x 4 x 4)")
+    p_WP = X_WH[:, :3, :3] @ estimate.p_HP + X_WH[:, :3, 3]
+    return (p_WP - estimate.p_WC) @ estimate.R_WC
+
+
+def path_information(state: np.ndarray, paths) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The information ``M`` the statistic holds on the unknowns ``[vec R_WC; p_WC; p_HP]`` (S's block
+    over every entry of x but the homogeneous one) and, for each candidate motion, the information
+    ``dM = sum_k w_k Phi_k^T Phi_k`` its samples add (``identification.excitation``; issue 25), with
+    ``Phi_k`` the unknowns' columns of ``A_t`` (Eq. (35)) at its k-th sample.
+
+    ``state`` is an ``EyeToHandIdentifier``'s state ``[S (256) | n_eff | count]``; each path is
+    ``(p_CP, X_WH, w)``: the points predicted along the motion (k x 3, m; ``predicted_points``), the
+    hand poses there (k x 4 x 4) and the samples each stands for (k, >= 0). IdentificationError
+    unless the arrays are real and of these shapes."""
+    n2 = N_UNKNOWNS * N_UNKNOWNS
+    state = real_array("state", state, (n2 + 2,))
+    unknowns = N_UNKNOWNS - 1
+    added = []
+    for p_CP, X_WH, w in paths:
+        X_WH = real_array("X_WH", X_WH, (None, 4, 4), what="hand poses (k x 4 x 4)")
+        k = X_WH.shape[0]
+        p_CP = real_array("p_CP", p_CP, (k, 3))
+        w = real_array("w", w, (k,))
+        if not np.all(w >= 0.0):
+            raise IdentificationError("the samples per pose w must be >= 0")
+        Phi = np.zeros((k, M_ROWS, unknowns))
+        for i in range(3):  # the c_i E blocks, then E, -R_WH (Eq. (35))
+            Phi[:, [0, 1, 2], [3 * i, 3 * i + 1, 3 * i + 2]] = p_CP[:, [i]]
+        Phi[:, [0, 1, 2], [9, 10, 11]] = 1.0
+        Phi[:, :, 12:15] = -X_WH[:, :3, :3]
+        added.append(np.einsum("k,kri,krj->ij", w, Phi, Phi))
+    S = state[:n2].reshape(N_UNKNOWNS, N_UNKNOWNS)
+    return S[:unknowns, :unknowns].copy(), added
+
+
 def pack_x(R_WC: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray) -> np.ndarray:
     """Eq. (36): ``x = [vec(R_WC); p_WC; p_HP; 1]`` (``vec`` stacks the columns). IdentificationError
     unless the arguments are a real 3 x 3 matrix and two real 3-vectors."""

@@ -21,6 +21,7 @@ from sustain_drake.systems.camera_motion_detector import CameraMotionDetector
 from sustain_drake.systems.candidate_identifiers import CandidateIdentifiers, FeatureRefiner
 from sustain_drake.systems.coordination_state_machine import CoordinationStateMachine
 from sustain_drake.systems.depth_noise import DepthNoiseModel
+from sustain_drake.systems.exciting_postures import HandEyePostures, HandKinematics
 from sustain_drake.systems.identifying_motion import IdentifyingMotion
 from sustain_drake.systems.motion_coincidence_detector import MotionCoincidenceDetector
 from sustain_drake.systems.optical_flow_tracker import OpticalFlowTracker
@@ -61,6 +62,9 @@ class HandEyeConfig:
     identifying_motion_max_hold: float = 3.0
     # rad (max-norm) from the arm's posture that the postures asked for more motion keep to; 0: anywhere
     identifying_motion_reach: float = 0.1
+    # the postures asked for are those whose moves add the most to the statistic of the point wanting
+    # motion, with it kept in view (needs the arm's plant; issue 25); else the farthest
+    excite: bool = True
     refine_points: bool = True  # feed the candidates fixed points and robust depth (FeatureRefiner)
     # the wrist wrench's payload identification (dynamic mode) watches the held tool: its change
     # detection is a slip, found while no tracked point shows it (needs a wrist force/torque sensor)
@@ -201,14 +205,17 @@ class HandEyeLoop:
 
 
 def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: HandEyeConfig | HandEyeParts,
-                      perception: BodyDetectionConfig, joint_ranges=None, motion_seed: int = 0,
-                      ) -> HandEyeLoop:  # fmt: skip
+                      perception: BodyDetectionConfig, joint_ranges=None, motion_seed: int = 0, *,
+                      kinematics: HandKinematics | None = None) -> HandEyeLoop:  # fmt: skip
     """Adds the tracker, detector, candidate identifiers and state machine, connected to each other.
     ``hand_eye`` is the user's ``HandEyeConfig`` or every setting (``HandEyeParts``).
     With ``hand_eye.camera_motion``, a ``CameraMotionDetector`` feeds the state machine's
     ``camera_motion``; with ``hand_eye.identifying_motion_interval`` > 0, an ``IdentifyingMotion``
     (far postures within ``joint_ranges``, n x [lower, upper] rad, drawn from ``motion_seed``)
-    forwards the detector's confirming requests and adds its own while identifying. Left for the
+    forwards the detector's confirming requests and adds its own while identifying; with
+    ``kinematics`` (``systems.exciting_postures.HandKinematics``: the arm's plant, hand frame, joints
+    and pace) it asks for the posture that adds the most to the statistic of the candidate wanting
+    more motion (``HandEyePostures``; issue 25), else the farthest. Left for the
     caller: the images (``HandEyeLoop.image_inputs``: the tracker's, with
     ``hand_eye.refine_points`` the ``FeatureRefiner``'s, with ``free_space_radius`` the candidates'
     depth), the joint positions
@@ -276,11 +283,16 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
                         candidates.GetInputPort("scene_still_since"))
     motion = None
     if hand_eye.identifying_motion_interval > 0:  # far postures while identifying (richer motion)
+        # The chooser keeps the point half a tracker window inside the image.
+        postures = None if kinematics is None else HandEyePostures(
+            kinematics, info, fps, margin_px=0.5 * tracker.params.lk_window_px)  # fmt: skip
         motion = builder.AddSystem(IdentifyingMotion(
             joint_ranges, hand_eye.identifying_motion_interval, seed=motion_seed, period=period,
             max_hold=hand_eye.identifying_motion_max_hold,
-            more_motion_reach=hand_eye.identifying_motion_reach or None))  # fmt: skip
+            more_motion_reach=hand_eye.identifying_motion_reach or None, postures=postures))  # fmt: skip
         motion.set_name("identifying_motion")
+        if postures is not None:
+            builder.Connect(candidates.GetOutputPort("motion_statistic"), motion.GetInputPort("statistic"))
         if perception.confirm:  # the detector's confirming requests first (body detection, §3.3)
             builder.Connect(detector.GetOutputPort("confirm"), motion.GetInputPort("detector_confirm"))
         builder.Connect(machine.GetOutputPort("mode"), motion.GetInputPort("mode"))

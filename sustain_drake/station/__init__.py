@@ -10,6 +10,7 @@ from sustain_drake.station.build import (
     babbling_ranges,
     build_station,
     camera_info,
+    hand_frame,
     held_shape,
     sensor_frame,
     sensor_pose_in_hand,
@@ -19,5 +20,5 @@ from sustain_drake.station.scenario import Scenario, ScenarioError
 from sustain_drake.station.scenario_files import load_scenario
 
 __all__ = ["EXPORTED_OUTPUTS", "Scenario", "ScenarioError", "babbling_joints", "babbling_ranges",
-           "build_station", "camera_info", "held_shape", "load_scenario", "models_dir", "sensor_frame",
-           "sensor_pose_in_hand"]
+           "build_station", "camera_info", "hand_frame", "held_shape", "load_scenario", "models_dir",
+           "sensor_frame", "sensor_pose_in_hand"]

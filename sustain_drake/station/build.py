@@ -192,6 +192,11 @@ def sensor_frame(station):
     return station.GetSubsystemByName("plant").GetJointByName(SENSOR_JOINT).frame_on_child()
 
 
+def hand_frame(station):
+    """The hand's body frame H (the wrist weld's child body) in the station's plant."""
+    return station.GetSubsystemByName("plant").GetJointByName(SENSOR_JOINT).child_body().body_frame()
+
+
 def sensor_pose_in_hand(station) -> RigidTransform:
     """``X_HK``: the wrist sensor's frame K (the weld's child frame) in the hand frame H."""
     plant = station.GetSubsystemByName("plant")

@@ -175,6 +175,7 @@ class CandidateIdentifiers(LeafSystem):
         - p_HP
         - candidates
         - more_motion
+        - motion_statistic
 
     Inputs: ``tracked_features`` (``TrackedFeatures`` of an ``OpticalFlowTracker``: ids, ``p_CP``
     in m, ``valid``, capture ``time``), ``feature_on_body`` (``FeatureBodyFlags`` of a
@@ -210,7 +211,10 @@ class CandidateIdentifiers(LeafSystem):
     ``params.min_rotation_lever`` or ``params.min_adopt_rotation_spread``, or its camera's 95 %
     region exceeded ``params.camera_accuracy`` or ``camera_rotation_accuracy``) until a leader is
     chosen, a reset, or no converged candidate is left; else 0: the hand should move more (connect
-    an ``IdentifyingMotion``'s ``more_motion``).
+    an ``IdentifyingMotion``'s ``more_motion``). ``motion_statistic`` (258): while ``more_motion`` is 1,
+    the statistic ``[S | n_eff | count]`` of the candidate held back for more views, else of the
+    centrally symmetric one with the most samples, else of the one with the most; zeros otherwise
+    (connect an ``IdentifyingMotion``'s ``statistic``).
 
     State: the ``CandidateBank`` (abstract, immutable: a cloned context shares it), updated every ``period``
     s (a periodic unrestricted update at the camera's rate).
@@ -266,6 +270,11 @@ class CandidateIdentifiers(LeafSystem):
             "more_motion", 1, lambda c, o: o.SetFromVector([float(self.bank(c).more_motion)]),
             prerequisites_of_calc={self.all_state_ticket()},
         )  # fmt: skip
+        self.DeclareVectorOutputPort(
+            "motion_statistic", N_UNKNOWNS * N_UNKNOWNS + 2,
+            lambda c, o: o.SetFromVector(self._motion_statistic(c)),
+            prerequisites_of_calc={self.abstract_state_ticket(self._bank)},
+        )  # fmt: skip
 
     @property
     def params(self) -> CandidateParams:
@@ -278,6 +287,18 @@ class CandidateIdentifiers(LeafSystem):
 
     def bank(self, context) -> CandidateBank:
         return context.get_abstract_state(self._bank).get_value().value
+
+    def _motion_statistic(self, context) -> np.ndarray:
+        """While ``more_motion``: the statistic of the candidate held back for more views, else of the
+        centrally symmetric candidate with the most samples (only such a point leads while one
+        converges in time), else of the one with the most samples; zeros otherwise."""
+        bank = self.bank(context)
+        wanting = None
+        if bank.more_motion and bank.candidates:
+            symmetric = [c for c in bank.candidates if c.symmetric]
+            wanting = bank.find(bank.held_back) or max(symmetric or bank.candidates,
+                                                       key=lambda c: c.solution.num_samples)
+        return wanting.statistic if wanting is not None else np.zeros(N_UNKNOWNS * N_UNKNOWNS + 2)
 
     def solution(self, context):
         """The shown candidate's solution (an empty one before any candidate). Only a leader's

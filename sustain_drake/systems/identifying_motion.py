@@ -7,6 +7,8 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from sustain_drake.identification import coordination
+from sustain_drake.identification.eye_to_hand import N_UNKNOWNS
+from sustain_drake.systems.exciting_postures import HandEyePostures
 
 # State vector: [output id, last detector id seen, time of the last request (own or detector's),
 # own requests so far, since when the arm stays near one posture, time of the last request made
@@ -50,13 +52,18 @@ class IdentifyingMotion(LeafSystem):
         - mode
         - joint_positions
         - more_motion (optional)
+        - statistic (optional)
         output_ports:
         - confirm
 
     Inputs: ``detector_confirm`` (``[request_id, joint, q_1..q_n]``, the detector's ``confirm``),
     ``mode`` (the ``CoordinationStateMachine``'s), ``joint_positions`` (n, rad), ``more_motion`` (1:
     > 0 while a ``CandidateIdentifiers``' ``more_motion`` asks for it; unconnected: never before the
-    first convergence). Output:
+    first convergence), ``statistic`` (258: the eye-to-hand statistic ``[S | n_eff | count]`` of the
+    candidate that wants the motion, a ``CandidateIdentifiers``' ``motion_statistic``; unconnected or
+    without samples: the farthest draw). With ``postures`` (a ``HandEyePostures``), the draw whose
+    move adds the most to ``statistic`` per second with the point kept in view is asked for, not the
+    farthest (issue 25; the farthest when none keeps it in view or there is no estimate yet). Output:
     ``confirm`` (``[request_id, joint, q_1..q_n]``, the motion generator's ``confirm`` format: a new
     id is a new request; connect to the station's ``motion_confirm``). Every ``period`` s a
     periodic discrete update; the draws come from a generator seeded with (``seed``, request
@@ -65,7 +72,8 @@ class IdentifyingMotion(LeafSystem):
 
     def __init__(self, joint_ranges, interval: float = 2.5, num_draws: int = 8, seed: int = 0,
                  period: float = 1.0 / 30.0, max_hold: float | None = None,
-                 more_motion_reach: float | None = None):  # fmt: skip
+                 more_motion_reach: float | None = None,
+                 postures: HandEyePostures | None = None):  # fmt: skip
         super().__init__()
         ranges = np.asarray(joint_ranges, float)
         if ranges.ndim != 2 or ranges.shape[1] != 2 or not np.all(ranges[:, 1] > ranges[:, 0]):
@@ -85,6 +93,11 @@ class IdentifyingMotion(LeafSystem):
         self._mode = self.DeclareVectorInputPort("mode", 1)
         self._q = self.DeclareVectorInputPort("joint_positions", n)
         self._more = self.DeclareVectorInputPort("more_motion", 1)
+        if postures is not None and postures.num_joints != n:
+            raise ValueError(f"IdentifyingMotion: postures chooses for {postures.num_joints} joints, the "
+                             f"ranges have {n}")
+        self._postures = postures
+        self._statistic = self.DeclareVectorInputPort("statistic", N_UNKNOWNS * N_UNKNOWNS + 2)
         self._anchor = _POSTURE + n
         self._request = self._anchor + n  # where the output request starts in the state
         initial = np.zeros(self._request + 1 + n)
@@ -141,7 +154,7 @@ class IdentifyingMotion(LeafSystem):
                 centre = x[self._anchor:self._request]
                 low, high = np.maximum(low, centre - self._reach), np.minimum(high, centre + self._reach)
             draws = rng.uniform(low, high, (self._draws, q.size))
-            far = draws[np.argmax(np.max(np.abs(draws - q), axis=1))]
+            far = self._chosen(context, q, draws)
             x[_ID] += 1
             x[_OWN] += 1
             x[_LAST_TIME] = t
@@ -150,3 +163,14 @@ class IdentifyingMotion(LeafSystem):
             x[self._request] = -1.0  # a usual move after the rest there
             x[self._request + 1:] = far
         state.get_mutable_vector(self._state).SetFromVector(x)
+
+    def _chosen(self, context, q: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        """The draw whose move adds the most to the ``statistic`` per second (``postures``), else the
+        farthest (max-norm) from ``q``."""
+        if self._postures is not None and self._statistic.HasValue(context):
+            statistic = self._statistic.Eval(context)
+            if statistic[N_UNKNOWNS * N_UNKNOWNS] > 0:  # samples behind it
+                i = self._postures.choose(q, draws, statistic)
+                if i is not None:
+                    return draws[i]
+        return draws[np.argmax(np.max(np.abs(draws - q), axis=1))]

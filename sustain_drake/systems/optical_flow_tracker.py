@@ -113,6 +113,10 @@ class OpticalFlowTracker(LeafSystem):
         return self._grid
 
     @property
+    def params(self) -> TrackerParams:
+        return self._params
+
+    @property
     def intrinsics(self) -> PinholeIntrinsics:
         return self._intrinsics
 
