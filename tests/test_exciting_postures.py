@@ -1,5 +1,6 @@
 """ExcitingPostures (issue 25): the babbling's next goal chosen for the information its rest adds,
-on the inertia_touch station's arm; and the kinesthetic experiment identifying sooner with it."""
+on the inertia_touch station's arm; the kinesthetic experiment identifying sooner with it; and
+HandEyePostures, the hand-eye loop's identifying motion's choice, on the same arm."""
 
 from pathlib import Path
 
@@ -7,16 +8,37 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.sensors import CameraInfo
 from scipy.spatial.transform import Rotation
 
 from sustain_drake.experiments import kinesthetic
-from sustain_drake.identification import IdentificationError, PayloadIdentifier, coordination, payload_dynamic
+from sustain_drake.identification import (
+    EyeToHandIdentifier,
+    IdentificationError,
+    PayloadIdentifier,
+    coordination,
+    payload_dynamic,
+)
 from sustain_drake.identification.excitation import information_gains
+from sustain_drake.identification.eye_to_hand import path_information, predicted_points
 from sustain_drake.identification.payload import STANDARD_GRAVITY_W, PostureInformation
 from sustain_drake.identification.payload_dynamic import MoveInformation
-from sustain_drake.station import babbling_joints, babbling_ranges, build_station, load_scenario, sensor_frame
+from sustain_drake.station import (
+    babbling_joints,
+    babbling_ranges,
+    build_station,
+    hand_frame,
+    load_scenario,
+    sensor_frame,
+)
 from sustain_drake.station.scenario import arm_motion
-from sustain_drake.systems.exciting_postures import MOVE_POINTS, Clearance, ExcitingPostures
+from sustain_drake.systems.exciting_postures import (
+    MOVE_POINTS,
+    Clearance,
+    ExcitingPostures,
+    HandEyePostures,
+    HandKinematics,
+)
 from sustain_drake.systems.motion_generator import Pace, move_duration, quintic
 from tests.test_payload import make_wrenches
 
@@ -194,3 +216,71 @@ def test_exciting_moves_identify_the_dynamic_payload_sooner_than_the_babbling():
         assert [e.kind for e in events][:1] == [coordination.CONVERGED], excite
         times[excite] = events[0].time
     assert times[True] < 0.8 * times[False], times
+
+
+# ---- the hand-eye loop's postures (HandEyePostures) -------------------------------------------------
+def _hand_eye_setup(station_and_chooser, camera_info=None):
+    """A camera 1.2 m in front of the hand at ``q0`` looking at it, a point 0.1 m out of the hand,
+    the statistic of 60 noise-free samples at postures within 0.2 rad of ``q0``, and the chooser."""
+    scenario, station, joints, pace, _, _ = station_and_chooser
+    plant = station.GetSubsystemByName("plant")
+    hand = hand_frame(station)
+    q0 = np.array(arm_motion(scenario).initial_posture)
+    context = plant.CreateDefaultContext()
+
+    def X_WH(q):
+        for joint, angle in zip(joints, q, strict=True):
+            joint.set_angle(context, angle)
+        return hand.CalcPoseInWorld(context).GetAsMatrix4()
+    p_HP = np.array([0.0, 0.0, 0.1])
+    X0 = X_WH(q0)
+    target = X0[:3, :3] @ p_HP + X0[:3, 3]
+    p_WC = target + np.array([1.2, 0.0, 0.2])
+    z = (target - p_WC) / np.linalg.norm(target - p_WC)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    R_WC = np.column_stack([x, np.cross(z, x), z])  # +z along the view, right-handed
+    rng = np.random.default_rng(4)
+    ident = EyeToHandIdentifier()
+    for q in q0 + rng.uniform(-0.2, 0.2, (60, len(joints))):
+        X = X_WH(q)
+        ident.add_pose(R_WC.T @ (X[:3, :3] @ p_HP + X[:3, 3] - p_WC), X)
+    info = camera_info or CameraInfo(640, 480, np.radians(60.0))
+    chooser = HandEyePostures(HandKinematics(plant, hand, joints, pace), info, 30.0, margin_px=7.5)
+    draws = q0 + rng.uniform(-0.3, 0.3, (8, len(joints)))
+    return chooser, q0, draws, ident, X_WH, pace, info
+
+
+def test_hand_eye_postures_choose_the_most_informative_move_in_view(station_and_chooser):
+    """The chosen draw is the one whose move (the quintic's points and the rest at its goal, at 30 Hz)
+    adds the most to the statistic per second among those whose predicted point stays in the image."""
+    chooser, q0, draws, ident, X_WH, pace, info = _hand_eye_setup(station_and_chooser)
+    chosen = chooser.choose(q0, draws, ident.state)
+    estimate = ident.solve(refine_estimate=False).projected
+    paths, durations = [], []
+    for goal in draws:
+        T = move_duration(q0, goal, pace.max_speed, pace.min_duration)
+        postures = [quintic(q0, goal, T, s)[0] for s in (np.arange(MOVE_POINTS) + 0.5) / MOVE_POINTS * T]
+        X = np.array([X_WH(q) for q in [*postures, goal]])
+        p_CP = predicted_points(estimate, X)
+        uv = p_CP[:, :2] / p_CP[:, 2:] * info.focal_x() + [info.center_x(), info.center_y()]
+        assert np.all(p_CP[:, 2] > 0) and np.all((uv > 7.5) & (uv < [640 - 7.5, 480 - 7.5]))  # all in view
+        paths.append((p_CP, X, np.r_[np.full(MOVE_POINTS, T * 30.0 / MOVE_POINTS), pace.dwell * 30.0]))
+        durations.append(T + pace.dwell)
+    M, added = path_information(ident.state, paths)
+    rates = information_gains(M, added) / np.array(durations)
+    assert chosen == int(np.argmax(rates)) and rates[chosen] > np.median(rates)
+
+
+def test_hand_eye_postures_choose_none_without_an_estimate_or_a_view(station_and_chooser):
+    """No samples: no estimate to predict with. A camera whose image a tracker window cannot fit in
+    (16 x 12 px against a 15 px window): no move keeps the point in view. The motion then asks for the
+    farthest posture, as without a chooser."""
+    chooser, q0, draws, ident, *_ = _hand_eye_setup(station_and_chooser)
+    assert chooser.choose(q0, draws, EyeToHandIdentifier().state) is None
+    tiny, q0, draws, ident, *_ = _hand_eye_setup(station_and_chooser, CameraInfo(16, 12, np.radians(60.0)))
+    assert tiny.choose(q0, draws, ident.state) is None
+    scenario, station, joints, pace, _, _ = station_and_chooser
+    kinematics = HandKinematics(station.GetSubsystemByName("plant"), hand_frame(station), joints, pace)
+    with pytest.raises(ValueError, match="margin_px"):
+        HandEyePostures(kinematics, CameraInfo(640, 480, 1.0), 30.0, margin_px=-1.0)

@@ -178,3 +178,59 @@ class Asking(LeafSystem):
     def __init__(self, asks):
         super().__init__()
         self.DeclareVectorOutputPort("more_motion", 1, lambda c, o: o.SetAtIndex(0, asks(c.get_time())))
+
+
+class Recording:
+    """A ``HandEyePostures`` stand-in: records each call and picks the draw nearest the arm's posture
+    (never the farthest of several random draws)."""
+
+    num_joints = 5
+
+    def __init__(self):
+        self.calls = []
+
+    def choose(self, q_now, goals, state):
+        self.calls.append((np.array(q_now), np.array(goals), np.array(state)))
+        return int(np.argmin(np.max(np.abs(goals - q_now), axis=1)))
+
+
+def _asked_with_chooser(statistic):
+    builder = DiagramBuilder()
+    scripted = builder.AddSystem(Scripted(t_observe=np.inf, t_request=np.inf))
+    chooser = Recording()
+    motion = builder.AddSystem(IdentifyingMotion(RANGES, interval=1.0, seed=3, period=0.1, postures=chooser))
+    q = builder.AddSystem(ConstantVectorSource(Q))
+    more = builder.AddSystem(Asking(lambda t: 1.0))
+    builder.Connect(scripted.GetOutputPort("mode"), motion.GetInputPort("mode"))
+    builder.Connect(q.get_output_port(), motion.GetInputPort("joint_positions"))
+    builder.Connect(more.get_output_port(), motion.GetInputPort("more_motion"))
+    builder.Connect(builder.AddSystem(ConstantVectorSource(statistic)).get_output_port(),
+                    motion.GetInputPort("statistic"))
+    simulator = Simulator(builder.Build())
+    requests = []
+    for t in np.arange(0.1, 6.0 + 1e-9, 0.1):
+        simulator.AdvanceTo(t)
+        out = motion.GetOutputPort("confirm").Eval(motion.GetMyContextFromRoot(simulator.get_context()))
+        if not requests or out[0] != requests[-1][0]:
+            requests.append(np.array(out))
+    return chooser, [r[2:] for r in requests if r[1] == -1.0 and r[0] > 0]
+
+
+def test_with_postures_the_chooser_picks_among_the_draws():
+    """With a chooser and a statistic with samples, each posture asked for is the chooser's pick among
+    the draws it was shown (here the nearest); with a statistic of no samples it is not asked, and the
+    farthest draw is asked for, as without one."""
+    statistic = np.zeros(258)
+    statistic[256:] = 10.0  # n_eff, count
+    chooser, asked = _asked_with_chooser(statistic)
+    assert len(asked) >= 3 and len(chooser.calls) == len(asked)
+    for (q_now, goals, state), request in zip(chooser.calls, asked, strict=True):
+        np.testing.assert_array_equal(state, statistic)
+        nearest = goals[np.argmin(np.max(np.abs(goals - q_now), axis=1))]
+        farthest = goals[np.argmax(np.max(np.abs(goals - q_now), axis=1))]
+        np.testing.assert_array_equal(request, nearest)
+        assert not np.array_equal(nearest, farthest)
+    idle, asked = _asked_with_chooser(np.zeros(258))
+    assert idle.calls == [] and len(asked) >= 3
+    with pytest.raises(ValueError, match="postures chooses for 5 joints"):
+        IdentifyingMotion(RANGES[:4], interval=1.0, postures=Recording())

@@ -217,3 +217,13 @@ def test_quick_confirm_far_from_the_posture_still_goes_back():
 def test_rejects_bad_ranges(args):
     with pytest.raises(ValueError):
         MotionGenerator(*args)
+
+
+def test_the_babbling_pace_is_the_scenarios_default():
+    """``BABBLING_PACE`` (assumed for a motion generator of the user's own) is the station's
+    ``MotionConfig`` default pace."""
+    from sustain_drake.station.scenario import MotionConfig
+    from sustain_drake.systems.motion_generator import BABBLING_PACE
+
+    m = MotionConfig()
+    assert BABBLING_PACE == (m.max_speed, m.min_duration, m.dwell)

@@ -298,3 +298,22 @@ def test_the_identifying_motion_takes_its_ranges_from_the_plant_limits():
     diagram = make_sustainable_coordination(CameraInfo(160, 120, 1.0), 3, plant=plant,
                                             hand_frame=plant.GetBodyByName("link3").body_frame())
     assert diagram.GetSubsystemByName("identifying_motion") is not None
+
+
+def test_with_excite_and_a_plant_the_identifying_motion_chooses_from_the_candidates_statistic():
+    """``hand_eye.excite`` with a plant: the candidates' ``motion_statistic`` feeds the identifying
+    motion's ``statistic`` (its postures chosen for what they add); without a plant, or with it off
+    (the default), the statistic is not connected and the farthest draw is asked for."""
+    plant = three_joint_arm()
+    arm = {"plant": plant, "hand_frame": plant.GetBodyByName("link3").body_frame()}
+    info = CameraInfo(160, 120, 1.0)
+
+    def fed(diagram) -> bool:
+        motion = diagram.GetSubsystemByName("identifying_motion")
+        candidates = diagram.GetSubsystemByName("candidate_identifiers")
+        source = diagram.connection_map().get((motion, motion.GetInputPort("statistic").get_index()))
+        return source == (candidates, candidates.GetOutputPort("motion_statistic").get_index())
+    assert fed(make_sustainable_coordination(info, 3, hand_eye=HandEyeConfig(excite=True), **arm))
+    assert not fed(make_sustainable_coordination(info, 3, **arm))
+    assert not fed(make_sustainable_coordination(info, 3, hand_eye=HandEyeConfig(excite=True),
+                                                 joint_ranges=[[-1.0, 1.0]] * 3))

@@ -18,7 +18,9 @@ from sustain_drake.loops.hand_eye import HandEyeConfig, add_hand_eye_loop, conne
 from sustain_drake.loops.inspection import add_inspection
 from sustain_drake.loops.payload import KinestheticConfig, add_payload_loop
 from sustain_drake.systems.coordination_outputs import AdoptedEstimates, InputsConnected, RequiredInput
+from sustain_drake.systems.exciting_postures import HandKinematics
 from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
+from sustain_drake.systems.motion_generator import BABBLING_PACE
 from sustain_drake.systems.sensor_kinematics import SensorKinematicsFromEncoders
 
 __all__ = ["AdoptedEstimates", "Loops", "camera_intrinsics", "joint_ranges_from_limits",
@@ -312,7 +314,8 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
     if a.loops.hand_eye:
         try:
             vision = add_hand_eye_loop(builder, a.camera_info, a.num_joints, a.fps, a.hand_eye,
-                                       a.body_detection, a.joint_ranges, a.motion_seed)  # fmt: skip
+                                       a.body_detection, a.joint_ranges, a.motion_seed,
+                                       kinematics=_hand_kinematics(a))  # fmt: skip
         except ValueError as e:
             raise ValueError(f"{OWNER}: {e}") from None
         for name in ("color_image", "depth_image", "image_time"):
@@ -377,10 +380,7 @@ def _connect_payload(builder, a: _Arguments, payload, X_WK, inputs: dict) -> Non
         builder.Connect(X_WK, payload.identifier.GetInputPort("X_WK"))
         return
     d = a.kinesthetic.dynamic
-    joints = None
-    if a.model_instance is not None:
-        joints = sorted((a.plant.get_joint(j) for j in a.plant.GetJointIndices(a.model_instance)
-                         if a.plant.get_joint(j).num_positions() > 0), key=lambda j: j.position_start())
+    joints = None if a.model_instance is None else _arm_joints(a)
     encoders = builder.AddSystem(SensorKinematicsFromEncoders(
         a.plant, a.sensor_frame or a.hand_frame, a.kinesthetic.period, d.encoder_window, d.encoder_order,
         joints, d.wrench_delay))  # fmt: skip
@@ -389,6 +389,23 @@ def _connect_payload(builder, a: _Arguments, payload, X_WK, inputs: dict) -> Non
     inputs["wrench"].append(encoders.GetInputPort("wrench"))
     for name, target in (("wrench_aligned", "wrench"), ("kinematics_K", "kinematics_K")):
         builder.Connect(encoders.GetOutputPort(name), payload.identifier.GetInputPort(target))
+
+
+def _arm_joints(a: _Arguments) -> list:
+    """The joints with positions of ``a.model_instance`` (every joint of ``a.plant`` if None), in the
+    order of their positions: those of the ``joint_positions`` input."""
+    indices = a.plant.GetJointIndices(*(() if a.model_instance is None else (a.model_instance,)))
+    joints = (a.plant.get_joint(j) for j in indices)
+    return sorted((j for j in joints if j.num_positions() > 0), key=lambda j: j.position_start())
+
+
+def _hand_kinematics(a: _Arguments) -> HandKinematics | None:
+    """With ``hand_eye.excite`` and a plant: the arm's kinematics for the identifying motion's choice,
+    its moves timed at the scenarios' babbling pace (``BABBLING_PACE``: your motion generator's moves
+    may differ; a shortest move's candidates are all ranked alike by it)."""
+    if a.plant is None or not a.hand_eye.excite:
+        return None
+    return HandKinematics(a.plant, a.hand_frame, _arm_joints(a), BABBLING_PACE)
 
 
 def _export_input(builder, name: str, ports: list) -> None:

@@ -63,8 +63,8 @@ class HandEyeConfig:
     # rad (max-norm) from the arm's posture that the postures asked for more motion keep to; 0: anywhere
     identifying_motion_reach: float = 0.1
     # the postures asked for are those whose moves add the most to the statistic of the point wanting
-    # motion, with it kept in view (needs the arm's plant; issue 25); else the farthest
-    excite: bool = True
+    # motion, with it kept in view (needs the arm's plant; issue 25); off: the farthest (no sooner)
+    excite: bool = False
     refine_points: bool = True  # feed the candidates fixed points and robust depth (FeatureRefiner)
     # the wrist wrench's payload identification (dynamic mode) watches the held tool: its change
     # detection is a slip, found while no tracked point shows it (needs a wrist force/torque sensor)

@@ -60,6 +60,11 @@ class Pace(NamedTuple):
     dwell: float
 
 
+# The pace of the scenarios' babbling (the station's ``MotionConfig`` defaults, which a test keeps
+# equal): the one assumed for a motion generator of the user's own.
+BABBLING_PACE = Pace(max_speed=0.6, min_duration=1.0, dwell=0.0)
+
+
 def shortest_move_reach(max_speed: float, min_duration: float) -> float:
     """rad: the largest joint change a move of ``min_duration`` covers at ``max_speed`` (the
     inverse of ``move_duration``)."""
