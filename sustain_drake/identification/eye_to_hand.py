@@ -186,12 +186,18 @@ def path_information(state: np.ndarray, paths) -> tuple[np.ndarray, list[np.ndar
     ``state`` is an ``EyeToHandIdentifier``'s state ``[S (256) | n_eff | count]``; each path is
     ``(p_CP, X_WH, w)``: the points predicted along the motion (k x 3, m; ``predicted_points``), the
     hand poses there (k x 4 x 4) and the samples each stands for (k, >= 0). IdentificationError
-    unless the arrays are real and of these shapes."""
+    unless ``paths`` is a list of such triples of real arrays."""
     n2 = N_UNKNOWNS * N_UNKNOWNS
     state = real_array("state", state, (n2 + 2,))
+    what = "paths must be a list of (p_CP, X_WH, w) triples"
+    if isinstance(paths, (str, bytes, dict)) or not hasattr(paths, "__iter__"):
+        raise IdentificationError(f"{what}, got {type(paths).__name__}")
     unknowns = N_UNKNOWNS - 1
     added = []
-    for p_CP, X_WH, w in paths:
+    for path in paths:
+        if not (isinstance(path, (tuple, list)) and len(path) == 3):
+            raise IdentificationError(f"{what}, got an element of type {type(path).__name__}")
+        p_CP, X_WH, w = path
         X_WH = real_array("X_WH", X_WH, (None, 4, 4), what="hand poses (k x 4 x 4)")
         k = X_WH.shape[0]
         p_CP = real_array("p_CP", p_CP, (k, 3))
