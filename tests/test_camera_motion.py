@@ -93,6 +93,7 @@ def test_a_camera_pan_is_one_move_despite_a_walking_person_and_a_moving_arm():
     assert state.moves == 0 and not state.moving  # a person and the arm alone: nothing
     state, out = run(scene, 15, motions, lambda k: True, state, start=30)
     assert state.moves == 1 and state.moving
+    assert state.move_start == pytest.approx(30 / FPS)  # the episode's first moving frame
     # Declared as soon as the composed motion reaches move_px (2.5 px per frame: on the 2nd frame).
     assert np.flatnonzero(out[:, 1] == 1)[0] == 1
     assert state.accumulated_px == pytest.approx(15 * np.hypot(2.0, 1.5), rel=0.02)
@@ -259,11 +260,13 @@ def test_the_system_declares_one_move_and_its_context_clones():
     assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [0.0, 0.0]
     # Judged still since the features became anchors (0.5 s still).
     assert 0.5 <= detector.GetOutputPort("scene_still_since").Eval(context)[0] <= 0.6
+    assert detector.GetOutputPort("move_start").Eval(context)[0] == -np.inf  # no move yet
     saved = simulator.get_context().Clone()
     simulator.AdvanceTo(1.2)
     context = detector.GetMyContextFromRoot(simulator.get_context())
     assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [1.0, 1.0]
     assert detector.GetOutputPort("scene_still_since").Eval(context)[0] == np.inf  # moving
+    assert 1.02 < detector.GetOutputPort("move_start").Eval(context)[0] < 1.2  # its first moving frame
     simulator.AdvanceTo(2.0)
     assert 1.5 < detector.GetOutputPort("scene_still_since").Eval(context)[0] < 1.7  # since the move ended
     assert list(detector.GetOutputPort("camera_motion").Eval(context)) == [0.0, 1.0]
@@ -405,6 +408,7 @@ def test_a_move_while_the_tracks_were_broken_is_found_from_the_still_scenes_imag
     assert state.moves == 1 and abs(state.accumulated_px - 12.0) < 0.5
     turn = state.turn
     assert turn.move == 1 and len(turn) >= 20 and turn.start < 40 / FPS
+    assert state.move_start == turn.start  # the reference's time: at most when the camera began to move
     def pixels(b):
         return b[:, :2] / b[:, 2:] * INTRINSICS.fx + [INTRINSICS.cx, INTRINSICS.cy]
 

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import candidates
 from sustain_drake.identification.candidates import CandidateBank, CandidateParams, FrameInput
-from sustain_drake.identification.coordination import CAMERA_MOVED
+from sustain_drake.identification.coordination import CAMERA_MOVED, OBSERVATION_FAILED
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, default_criteria, pack_x
 
 CRITERIA = default_criteria()
@@ -846,6 +846,52 @@ def test_after_a_camera_move_the_tool_points_are_kept_and_only_the_camera_is_new
     for slid in ((4, 5, 6), (9, 4, 5, 6, 8)):
         bank, k_slid = run_move(params, slid=slid)
         assert k_slid is None or bank.adoptions[-1].kind != "previous tool points"
+
+
+def test_a_reset_found_later_to_be_a_camera_move_keeps_the_candidates_since():
+    """The observation rule resets for the camera's move at frame 400 (``OBSERVATION_FAILED``: the
+    kept camera is offered as the previous one); at frame 450 the move is found to have begun before
+    that reset, and the reason becomes ``CAMERA_MOVED`` with no new reset. The candidates since the
+    move stay, the tool points of the model the reset cleared are kept, and the camera comes from
+    them at once (their 50 samples since the move); a new camera-move reset at 450 instead drops
+    those samples and waits for 50 more."""
+    points = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05],
+              6: P_TOOL + [0.02, 0.05, 0.02], 8: P_TOOL + [-0.01, -0.04, 0.06]}
+    moved = TRUTH.X_WC.copy()
+    moved[:3, :3] = Rotation.from_rotvec([0.0, 0.1, 0.12]).as_matrix() @ moved[:3, :3]
+    moved[:3, 3] += [0.05, 0.0, -0.02]
+    params = replace(HANDOVER, max_observers=3, keep_tool_points=True, min_point_spread=0.03)
+
+    def run_move(second_reset: bool):
+        bank, rng, model = CandidateBank(), np.random.default_rng(3), None
+        for k in range(700):
+            X = hand_pose(k)
+            X_WC = moved if k >= 400 else TRUTH.X_WC
+            p = [seen(X, points[i], rng, X_WC=X_WC) for i in points]
+            if k < 400 and bank.leader >= 0:
+                model = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], points[bank.leader])
+            found = k >= 450
+            reset = float(k >= 400) + float(found and second_reset)
+            reason = CAMERA_MOVED if found else OBSERVATION_FAILED
+            frame = FrameInput(k * DT, reset, X, k * DT, np.array(list(points)), np.array(p),
+                               np.ones(5, bool), np.ones(5, bool), None if found else model,
+                               allowable_error=1e-4, reset_reason=reason)
+            bank = candidates.step(bank, params, CRITERIA, frame)
+            if k == 449:
+                assert bank.previous_x is not None and bank.leader < 0  # nothing fits the kept camera
+            if k == 450 and not second_reset:
+                assert bank.previous_x is None and bank.cleared is None and len(bank.known_points) == 5
+                assert min(c.solution.num_samples for c in bank.candidates) >= 50  # the samples since 400
+            if k >= 450 and bank.leader >= 0:
+                return bank, k
+        return bank, None
+
+    bank, k = run_move(second_reset=False)
+    assert k == 450 and bank.adoptions[-1].kind == "previous tool points"
+    assert np.linalg.norm(bank.adoptions[-1].estimate.p_WC - moved[:3, 3]) < 1e-3
+    assert rotation_error_deg(bank.adoptions[-1].estimate.R_WC, moved[:3, :3]) < 0.2
+    bank, k_reset = run_move(second_reset=True)
+    assert k_reset == 450 + params.observe_min_samples - 1
 
 
 @pytest.mark.parametrize("keep", [False, True])

@@ -1,5 +1,7 @@
 """The identify <-> observe rule (pure) and the identifier + state machine systems in a diagram."""
 
+import math
+
 import numpy as np
 import pytest
 from eye_to_hand_data import make_truth, rotation_error_deg
@@ -262,6 +264,42 @@ def test_a_camera_move_is_a_change_detection_and_keeps_the_identifier_reset_whil
     assert event.kind == coordination.CHANGE_DETECTED and state[coordination.RESET_COUNT] == 1
 
 
+def test_a_move_found_after_the_observations_reset_for_it_is_that_resets_change():
+    """``camera_move_start`` (beyond the paper): a move declared late (the camera at rest again) that
+    began before the observation rule's reset, with no convergence since, changes that reset's
+    reason to a camera move in place: no event, no new reset, the identification under way goes on.
+    A move that began after the reset, one still moving, or one after a convergence is a change."""
+    over = 2e-4
+    failed, events = run_rule([(True, 1e-6, 2 + k, over) for k in range(10)], observing_state())
+    assert [e.kind for e in events] == [coordination.CHANGE_DETECTED]
+    assert failed[coordination.RESET_REASON] == coordination.OBSERVATION_FAILED
+    reset_at, resets = failed[coordination.RESET_TIME], failed[coordination.RESET_COUNT]
+    assert np.isfinite(reset_at)
+    idle = Report(False, 1.0, 40, 0.0)
+    found, event = coordination.step(failed, RULE, reset_at + 15.0, idle, camera_moves=1,
+                                     camera_move_start=reset_at - 0.5)
+    assert event is None and found[coordination.RESET_COUNT] == resets
+    assert found[coordination.RESET_REASON] == coordination.CAMERA_MOVED
+    assert found[coordination.MODE] == coordination.IDENTIFY and found[coordination.DETECTIONS] == 1
+    # The identification under way (its samples since the reset) is then adopted as usual.
+    found, event = coordination.step(found, RULE, reset_at + 15.1, Report(True, 1e-6, 41, 0.0, 20),
+                                     camera_moves=1, camera_move_start=reset_at - 0.5)
+    assert event.kind == coordination.CONVERGED
+    # Otherwise a change detection with a reset: a move that began after the reset, ...
+    for moving, start in ((False, reset_at + 1.0), (True, reset_at - 0.5)):  # ... or still moving
+        later, event = coordination.step(failed, RULE, reset_at + 15.0, idle, camera_moving=moving,
+                                         camera_moves=1, camera_move_start=start)
+        assert event.kind == coordination.CHANGE_DETECTED and later[coordination.RESET_COUNT] == resets + 1
+        assert later[coordination.RESET_TIME] == reset_at + 15.0
+    # ... a move in OBSERVE (converged since the reset), and a move with no start given.
+    for state, start in ((found, reset_at - 0.5), (failed, None)):
+        later, event = coordination.step(state, RULE, reset_at + 16.0, Report(False, 1.0, 42, 0.0),
+                                         camera_moves=2 if state is found else 1, camera_move_start=start)
+        assert event.kind == coordination.CHANGE_DETECTED
+    with pytest.raises(coordination.IdentificationError, match="camera_move_start"):
+        coordination.step(failed, RULE, 1.0, idle, camera_moves=1, camera_move_start=math.nan)
+
+
 class ScriptedCameraMotion(LeafSystem):
     """``[moving, moves]`` of a camera that moves from ``t0`` for ``duration`` s."""
 
@@ -311,6 +349,48 @@ def test_a_camera_move_clears_the_adopted_model():
     assert sm.GetOutputPort("adopted_solution").Eval(context) is None
     simulator.AdvanceTo(12.0)
     assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)  # re-identified
+
+
+class ScriptedLateMove(LeafSystem):
+    """A camera-motion detector that declares at ``t_found`` a move that began at ``t_start``."""
+
+    def __init__(self, t_start, t_found):
+        super().__init__()
+        self.DeclareVectorOutputPort("camera_motion", 2, lambda c, o: o.SetFromVector(
+            [0.0, float(c.get_time() >= t_found)]))  # fmt: skip
+        self.DeclareVectorOutputPort("move_start", 1, lambda c, o: o.SetAtIndex(
+            0, t_start if c.get_time() >= t_found else -np.inf))  # fmt: skip
+
+
+def test_a_move_found_after_the_observations_reset_drops_the_kept_model_without_a_new_reset():
+    """The point moves on the hand at 8 s (to the identifier, as a moved camera would look) and the
+    observation rule resets, keeping the abandoned model; at 9.5 s the detector declares a move that
+    began at 7.9 s: the reset becomes a camera move's (reason 2), the kept model is dropped, and no
+    second change is detected."""
+    truth, _, _, _ = build(t_slip=np.inf)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ScriptedHandPoint(truth, truth.p_HP + [0.03, -0.02, 0.01], 8.0, 0.1))
+    ident = builder.AddSystem(SustainableIdentifierSystem(EyeToHandFormulation(), period=0.1))
+    sm = builder.AddSystem(CoordinationStateMachine(16, period=0.1))
+    camera = builder.AddSystem(ScriptedLateMove(7.9, 9.5))
+    builder.Connect(source.GetOutputPort("p_CP"), ident.GetInputPort("p_CP"))
+    builder.Connect(source.GetOutputPort("X_WH"), ident.GetInputPort("X_WH"))
+    builder.Connect(camera.GetOutputPort("camera_motion"), sm.GetInputPort("camera_motion"))
+    builder.Connect(camera.GetOutputPort("move_start"), sm.GetInputPort("camera_move_start"))
+    connect_identify_observe(builder, ident, sm)
+    simulator = Simulator(builder.Build())
+    context = sm.GetMyContextFromRoot(simulator.get_context())
+    simulator.AdvanceTo(9.4)
+    assert [e.kind for e in sm.events(context)] == [coordination.CONVERGED, coordination.CHANGE_DETECTED]
+    assert sm.GetOutputPort("reset_reason").Eval(context)[0] == coordination.OBSERVATION_FAILED
+    assert np.any(sm.GetOutputPort("adopted_x").Eval(context) != 0)  # kept as the previous camera
+    resets = sm.GetOutputPort("reset").Eval(context)[0]
+    simulator.AdvanceTo(9.7)
+    assert sm.GetOutputPort("reset_reason").Eval(context)[0] == coordination.CAMERA_MOVED
+    assert not np.any(sm.GetOutputPort("adopted_x").Eval(context))
+    assert sm.GetOutputPort("adopted_solution").Eval(context) is None
+    assert sm.GetOutputPort("reset").Eval(context)[0] == resets
+    assert [e.kind for e in sm.events(context)] == [coordination.CONVERGED, coordination.CHANGE_DETECTED]
 
 
 def _observing(body_changes=0):

@@ -160,7 +160,8 @@ TARGETS = {
     "coordination.allowable_error": (coordination.allowable_error, (RULE, 1e-6)),
     "coordination.initial_state": (coordination.initial_state, ()),
     "coordination.IdentifierReport": (coordination.IdentifierReport, (True, 1e-6, 5, 1e-7, 5, 0)),
-    "coordination.step": (coordination.step, (coordination.initial_state(), RULE, 1.0, REPORT, False, None)),
+    "coordination.step": (coordination.step, (coordination.initial_state(), RULE, 1.0, REPORT, False, None,
+                                              None, None)),
 }
 
 # Result records, not checked (built by the API itself), and the checks themselves.
@@ -376,7 +377,7 @@ BAD_CALLS = [
     _bad("coordination.CoordinationRule", 4, "yes", "adopt_refinements"),
     _bad("coordination.allowable_error", 1, np.nan, "expected_mse"),
     _bad("coordination.step", 0, None, "state"),
-    _bad("coordination.step", 0, np.full(15, np.inf), "state"),
+    _bad("coordination.step", 0, np.full(coordination.STATE_SIZE, np.inf), "state"),
     _bad("coordination.step", 1, None, "rule"),
     _bad("coordination.step", 2, np.inf, "time"),
     _bad("coordination.IdentifierReport", 0, "yes", "converged"),
@@ -387,6 +388,8 @@ BAD_CALLS = [
     _bad("coordination.step", 3, (True, 1e-6, 5, 1e-7), "report"),
     _bad("coordination.step", 4, "yes", "camera_moving"),
     _bad("coordination.step", 5, -2, "camera_moves"),
+    _bad("coordination.step", 7, np.nan, "camera_move_start"),
+    _bad("coordination.step", 7, "soon", "camera_move_start"),
 ]
 
 

@@ -25,7 +25,14 @@ motion from the static scene. A new camera move is a change detection like the r
 event, with its time: the mode goes to IDENTIFY and the identifier is reset), in either mode (a
 half-identified model is as stale as an adopted one); while that camera is still moving the
 identifier is kept reset (each tick bumps the reset count), since samples taken while the camera
-moves fit no camera. Without these inputs (None) the rule is the one above, unchanged.
+moves fit no camera. A move found late (``camera_move_start``, when the declared move began: the
+detector's tracks lost it, and its still reference matched into the frame once the scene was still
+again) that began no later than the last reset, an observation failure with no convergence since,
+is the change that reset was for: the samples over the limit were the moved camera's. It is no new
+change detection (the identification under way is of the moved camera, its samples all taken
+since): the reset's reason becomes ``CAMERA_MOVED`` in place, the reset count unchanged, so the
+identifier drops the camera it kept and uses the move's turn. Without these inputs (None) the rule
+is the one above, unchanged.
 
 Beyond the paper (``body_changes``, e.g. the wrist wrench's payload identification): a count of the
 held body's changes that another sensor detected. A new one in OBSERVE is a change of the body that
@@ -110,9 +117,10 @@ class CoordinationRule:
 
 # Layout of the state vector.
 (MODE, VIOLATIONS, SIGMA, RESET_COUNT, PAUSE_ID, LAST_SAMPLE, CONVERGENCES, DETECTIONS, RESET_SAMPLE,
- REFINEMENT, CAMERA_MOVES, CAMERA_MOVING, RESET_REASON, BODY_CHANGES, BODY_PENDING) = range(15)
-STATE_SIZE = 15
+ REFINEMENT, CAMERA_MOVES, CAMERA_MOVING, RESET_REASON, BODY_CHANGES, BODY_PENDING, RESET_TIME) = range(16)
+STATE_SIZE = 16
 # BODY_PENDING: the ticks counted since a body change was reported in OBSERVE (-1: none pending)
+# RESET_TIME: s, when the identifier was last reset (-inf: not yet)
 
 # Why the identifier was last reset (the state's RESET_REASON; the state machine's reset_reason port).
 NO_RESET = 0  # not reset yet
@@ -141,6 +149,7 @@ def initial_state() -> np.ndarray:
     state = np.zeros(STATE_SIZE)
     state[LAST_SAMPLE] = -1.0
     state[BODY_PENDING] = -1.0
+    state[RESET_TIME] = -math.inf
     return state
 
 
@@ -205,6 +214,7 @@ def step(
     camera_moving: bool = False,
     camera_moves: int | None = None,
     body_changes: int | None = None,
+    camera_move_start: float | None = None,
 ) -> tuple[np.ndarray, Event | None]:
     """One tick of the rule. Returns the new state (a copy) and the event it decided, if any.
 
@@ -220,12 +230,16 @@ def step(
             with the reason ``OBSERVATION_FAILED`` (a slip, the camera kept) after
             ``max_consecutive_violations`` ticks without a new sample over the limit, unless the
             rule detects the change first (see the module docstring).
+        camera_move_start: when the camera move of ``camera_moves`` began (s; None: not known): a new
+            move that began no later than the last reset, an observation failure in IDENTIFY, and no
+            longer moving, is that reset's change (the reason becomes ``CAMERA_MOVED``, no event).
 
     Raises IdentificationError for an argument of the wrong type or value: ``state`` not a real
     vector of STATE_SIZE, ``rule`` not a CoordinationRule, ``report`` not an IdentifierReport,
     ``time`` not finite, ``camera_moving`` not a bool, the counts not integers >= 0.
     """
-    state = _checked_step_arguments(state, rule, time, report, camera_moving, camera_moves, body_changes)
+    state = _checked_step_arguments(state, rule, time, report, camera_moving, camera_moves, body_changes,
+                                    camera_move_start)
     converged, expected_mse, sample_count = report.converged, report.expected_mse, report.sample_count
     new = state.copy()
     new_sample = sample_count != int(state[LAST_SAMPLE])
@@ -233,13 +247,18 @@ def step(
     if camera_moves is not None:
         new[CAMERA_MOVES] = camera_moves
         if camera_moves > state[CAMERA_MOVES]:
+            if (camera_move_start is not None and not camera_moving and int(state[MODE]) == IDENTIFY
+                    and state[RESET_REASON] == OBSERVATION_FAILED and camera_move_start <= state[RESET_TIME]):
+                new[RESET_REASON] = CAMERA_MOVED  # the change the last reset was for (module docstring)
+                return new, None
             new[CAMERA_MOVING] = 1.0
             event = Event(time, CHANGE_DETECTED, CAMERA_MOVED_DETAIL)
-            return _detect_change(new, sample_count, CAMERA_MOVED), event
+            return _detect_change(new, sample_count, CAMERA_MOVED, time), event
         if state[CAMERA_MOVING]:
             if camera_moving:  # keep the identifier reset: these samples fit no camera
                 new[RESET_COUNT] += 1
                 new[RESET_SAMPLE] = sample_count
+                new[RESET_TIME] = time
                 return new, None
             new[CAMERA_MOVING] = 0.0
     if body_changes is not None:
@@ -268,17 +287,18 @@ def step(
     if new_sample:
         new[VIOLATIONS] = new[VIOLATIONS] + 1 if violation else 0
     if new[VIOLATIONS] >= rule.max_consecutive_violations:
-        return _detect_change(new, sample_count, OBSERVATION_FAILED), Event(
+        return _detect_change(new, sample_count, OBSERVATION_FAILED, time), Event(
             time, CHANGE_DETECTED, f"{rule.max_consecutive_violations} samples over the limit")
     if new[BODY_PENDING] >= 0 and not violation:  # a tick the camera shows nothing against the model
         new[BODY_PENDING] += 1
         if new[BODY_PENDING] >= rule.max_consecutive_violations:
-            return _detect_change(new, sample_count, OBSERVATION_FAILED), Event(
+            return _detect_change(new, sample_count, OBSERVATION_FAILED, time), Event(
                 time, CHANGE_DETECTED, BODY_CHANGED_DETAIL)
     return new, None
 
 
-def _checked_step_arguments(state, rule, time, report, camera_moving, camera_moves, body_changes):
+def _checked_step_arguments(state, rule, time, report, camera_moving, camera_moves, body_changes,
+                            camera_move_start):
     """``step``'s arguments checked (IdentificationError naming the first bad one); returns the state
     as a float64 vector."""
     if not (type(state) is np.ndarray and state.dtype is F64 and state.shape == (STATE_SIZE,)):
@@ -293,10 +313,14 @@ def _checked_step_arguments(state, rule, time, report, camera_moving, camera_mov
     for name, count in (("camera_moves", camera_moves), ("body_changes", body_changes)):
         if count is not None:
             integer(name, count, 0)
+    if camera_move_start is not None:
+        start = real_number("camera_move_start", camera_move_start, finite=False)
+        if math.isnan(start) or start == math.inf:
+            raise IdentificationError(f"camera_move_start must be a time in s or -inf (none), got {start}")
     return state
 
 
-def _detect_change(new: np.ndarray, sample_count: int, reason: int) -> np.ndarray:
+def _detect_change(new: np.ndarray, sample_count: int, reason: int, time: float) -> np.ndarray:
     """A change detection (in place on ``new``) for ``reason``: back to IDENTIFY, the identifier
     reset (its solutions with more samples than arrive from now on are stale)."""
     new[RESET_REASON] = reason
@@ -306,4 +330,5 @@ def _detect_change(new: np.ndarray, sample_count: int, reason: int) -> np.ndarra
     new[RESET_COUNT] += 1
     new[DETECTIONS] += 1
     new[RESET_SAMPLE] = sample_count
+    new[RESET_TIME] = time
     return new

@@ -274,6 +274,8 @@ def add_hand_eye_loop(builder, info, num_joints: int, fps: float, hand_eye: Hand
         for name in ("feature_on_body", "body_feature_cells"):
             builder.Connect(detector.GetOutputPort(name), camera.GetInputPort(name))
         builder.Connect(camera.GetOutputPort("camera_motion"), machine.GetInputPort("camera_motion"))
+        # A move found after the observation's reset for it is that reset's change, not a second one.
+        builder.Connect(camera.GetOutputPort("move_start"), machine.GetInputPort("camera_move_start"))
         # The identifiers' candidates without the static scene's features (stale body cells).
         builder.Connect(camera.GetOutputPort("feature_on_body"), candidates.GetInputPort("feature_on_body"))
         if candidate_params.keep_tool_points:  # a camera turn re-found from the scene and the tool points

@@ -221,6 +221,9 @@ class CameraMotionState:
     or last episode's first moving frame (s); ``turn``: the last move's ``SceneTurn``;
     ``judged_still_since``: since when every frame was judged and still, outside an episode (s; inf
     now: moving, in an episode, or too few anchors to judge), so the camera has not moved since;
+    ``move_start``: when the last declared camera move began (s; -inf before any: its episode's first
+    moving frame, or the time of the reference a move the tracks missed was found against, so at
+    most when the camera began to move);
     ``reference``: a still frame of the scene (``scene_reference.SceneReference``; kept only when
     ``step`` is given the grey image), ``gap``: since it was taken a frame was not judged or an
     episode ended undeclared, so the tracks may have missed a move (checked against it when the
@@ -249,6 +252,7 @@ class CameraMotionState:
     episode_start: float = -math.inf
     turn: SceneTurn = field(default_factory=SceneTurn)
     judged_still_since: float = math.inf
+    move_start: float = -math.inf
     reference: SceneReference | None = None
     gap: bool = False
     before_move: SceneReference | None = None
@@ -469,7 +473,7 @@ def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray,
         if not new.declared and new.frames >= params.min_frames and accumulated >= params.move_px:
             # A move the tracks followed: the reference is of the camera before it.
             new = replace(new, declared=True, moves=state.moves + 1, reference=None, gap=False,
-                          before_move=state.reference)
+                          before_move=state.reference, move_start=new.episode_start)
         return new
     if not frame.judged and new.reference is not None:
         # The tracks may miss a move now: the view after starts anew (a view across a move is none).
@@ -570,4 +574,5 @@ def _checked_against_reference(state: CameraMotionState, gray: np.ndarray, ids: 
         return state
     turn = _matched_turn(found, state.moves + 1, float(time), reference.time, intrinsics)
     return replace(state, moves=state.moves + 1, declared=True, accumulated_px=found.moved_px,
-                   M_episode=found.H, episode_start=reference.time, turn=turn, view_before=None)
+                   M_episode=found.H, episode_start=reference.time, move_start=reference.time, turn=turn,
+                   view_before=None)

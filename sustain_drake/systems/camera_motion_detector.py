@@ -50,6 +50,7 @@ class CameraMotionDetector(LeafSystem):
         - feature_on_body
         - scene_turn
         - scene_still_since
+        - move_start
 
     Inputs: ``tracked_features`` (``TrackedFeatures`` of the ``OpticalFlowTracker``: the tracks'
     own pixels and flows), ``feature_on_body`` (``FeatureBodyFlags`` of the
@@ -73,7 +74,10 @@ class CameraMotionDetector(LeafSystem):
     only with ``camera_info``, the camera's intrinsics, and the tracked features' 3-D points;
     connect to the ``CandidateIdentifiers``' ``scene_turn``), ``scene_still_since`` (1, s: since
     when every frame was judged still, outside a move; inf while moving or when too few anchors
-    judge a frame: connect to the ``CandidateIdentifiers``' ``scene_still_since``).
+    judge a frame: connect to the ``CandidateIdentifiers``' ``scene_still_since``), ``move_start``
+    (1, s: when the last declared camera move began, -inf before any; connect to the
+    ``CoordinationStateMachine``'s ``camera_move_start``, so that a move found late, after the
+    observation rule's reset for it, is not declared a second change).
 
     Every ``period`` s (offset ``offset``: after the coincidence detector's update of the same
     frame) a periodic unrestricted update runs one step on a new frame (a frame time not newer
@@ -113,6 +117,8 @@ class CameraMotionDetector(LeafSystem):
             prerequisites_of_calc={self.all_state_ticket(), self._flags.ticket()})  # fmt: skip
         self.DeclareVectorOutputPort("scene_still_since", 1, lambda c, o: o.SetAtIndex(
             0, self.motion_state(c).judged_still_since), prerequisites_of_calc=state)  # fmt: skip
+        self.DeclareVectorOutputPort("move_start", 1, lambda c, o: o.SetAtIndex(
+            0, self.motion_state(c).move_start), prerequisites_of_calc=state)  # fmt: skip
         self.DeclareAbstractOutputPort(
             "scene_turn", lambda: AbstractValue.Make(SceneTurn()),
             lambda c, o: o.set_value(self.motion_state(c).turn), prerequisites_of_calc=state)  # fmt: skip

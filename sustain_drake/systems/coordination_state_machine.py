@@ -23,6 +23,7 @@ class CoordinationStateMachine(LeafSystem):
         - observation
         - camera_motion (optional)
         - body_changes (optional)
+        - camera_move_start (optional)
         output_ports:
         - mode
         - adopted_x
@@ -44,7 +45,10 @@ class CoordinationStateMachine(LeafSystem):
     sensor; connect a payload loop's state machine's ``reset``, which counts the wrist wrench's change
     detections; beyond the paper): a new one in OBSERVE is a change detection for a slip, the camera
     kept, unless the observation rule detects the change itself within its window
-    (``coordination.step``); unconnected, none.
+    (``coordination.step``); unconnected, none. ``camera_move_start`` (optional, 1, s: when the
+    detector's last declared move began: connect a ``CameraMotionDetector``'s ``move_start``): a move
+    found after the observation rule's reset for it is that reset's change, not a new one
+    (``coordination.step``); unconnected, every new move is a change detection.
 
     Outputs: ``mode`` (1: 0 IDENTIFY, 1 OBSERVE); ``adopted_x`` (N, the adopted estimate; zeros
     while there is none: before the first convergence and from a camera move to the next
@@ -75,6 +79,7 @@ class CoordinationStateMachine(LeafSystem):
         self._observation = self.DeclareVectorInputPort("observation", 2)
         self._camera_motion = self.DeclareVectorInputPort("camera_motion", 2)
         self._body_changes = self.DeclareVectorInputPort("body_changes", 1)
+        self._camera_move_start = self.DeclareVectorInputPort("camera_move_start", 1)
         self._state = self.DeclareDiscreteState(coordination.initial_state())
         self._adopted_x = self.DeclareDiscreteState(np.zeros(num_unknowns))
         self._adopted_x_size = int(num_unknowns)
@@ -131,6 +136,8 @@ class CoordinationStateMachine(LeafSystem):
             optional = {"camera_moving": bool(moving > 0.5), "camera_moves": int(moves)}
         if self._body_changes.HasValue(context):
             optional["body_changes"] = int(self._body_changes.Eval(context)[0])
+        if self._camera_move_start.HasValue(context):
+            optional["camera_move_start"] = float(self._camera_move_start.Eval(context)[0])
         solution = None
         if self.mode(context) == coordination.OBSERVE and not self._rule.adopt_refinements:
             # Observing without refinements, the rule reads only the observation: nothing is solved.
@@ -145,13 +152,17 @@ class CoordinationStateMachine(LeafSystem):
         new, event = coordination.step(self._vector(context), self._rule, context.get_time(), report,
                                        **optional)
         state.get_mutable_discrete_state(self._state).set_value(new)
+        camera_moved = (new[coordination.RESET_REASON] == coordination.CAMERA_MOVED
+                        and self._vector(context)[coordination.RESET_REASON] != coordination.CAMERA_MOVED)
         if event is not None:
             state.get_mutable_abstract_state(self._events).set_value(self.events(context) + (event,))
             if event.kind in (coordination.CONVERGED, coordination.REFINED):
                 state.get_mutable_abstract_state(self._adopted).set_value(solution)
                 state.get_mutable_discrete_state(self._adopted_x).set_value(solution.x)
             elif new[coordination.RESET_REASON] == coordination.CAMERA_MOVED:  # a change detection
-                # The camera is known to have moved: its model is dropped, not offered again as the
-                # "previous camera" that a slipped tool would leave in place.
-                state.get_mutable_abstract_state(self._adopted).set_value(None)
-                state.get_mutable_discrete_state(self._adopted_x).set_value(np.zeros(self._adopted_x_size))
+                camera_moved = True
+        if camera_moved:  # a change detection, or the last one found to be a camera move
+            # The camera is known to have moved: its model is dropped, not offered again as the
+            # "previous camera" that a slipped tool would leave in place.
+            state.get_mutable_abstract_state(self._adopted).set_value(None)
+            state.get_mutable_discrete_state(self._adopted_x).set_value(np.zeros(self._adopted_x_size))

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from sustain_drake.identification.coordination import NO_RESET
 from sustain_drake.identification.eye_to_hand import (
     EyeToHandEstimate,
     EyeToHandIdentifier,
@@ -127,6 +128,7 @@ class CandidateBank:
     turn_rotation_sd: float = math.inf
     turned_p_WC: np.ndarray | None = None  # and where the scene's depth puts it (None: not known)
     reset_time: float = -math.inf  # s, when the last reset came
+    last_reason: int = NO_RESET  # why that reset (``FrameInput.reset_reason``), as last seen
     more_motion: bool = False  # a leader was held back (lever or spread), none leads, one converged
     held_back: int = -1  # the feature id of the candidate held back (as above), -1: none
 

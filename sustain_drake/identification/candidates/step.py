@@ -30,6 +30,8 @@ def step(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCrit
     loss, the leader and the observation. Returns the new bank."""
     if frame.reset != bank.last_reset:
         bank = _after_reset(bank, params, frame)
+    elif frame.reset_reason == CAMERA_MOVED and bank.last_reason != CAMERA_MOVED:
+        bank = _found_camera_move(bank, params, frame)
     bank = record_pose(bank, frame.time, frame.X_WH)
     bank = with_scene_turn(bank, frame.scene_turn)
     reference_x = frame.reference_x
@@ -102,11 +104,27 @@ def _after_reset(bank: CandidateBank, params: CandidateParams, frame: FrameInput
                    known_points=known, known_corners=corners, known_at=known_at, model_x=None,
                    moved_from_x=moved[0], moved_at=moved[1], moved_since=moved[2], cleared=cleared,
                    turn=None, turned_R_WC=None, turned_p_WC=None, turn_rotation_sd=math.inf,
-                   reset_time=float(time), last_reset=float(frame.reset), round_start=math.nan,
+                   reset_time=float(time), last_reset=float(frame.reset), last_reason=frame.reset_reason,
+                   round_start=math.nan,
                    observed_last=None, observed_p_HP=None,
                    witness=-1, witness_p_HP=None, witness_last=None, primary_failures=0, archive=(),
                    observers=(), refined_solution=None, last_refinement=-math.inf, more_motion=False,
                    held_back=-1)
+
+
+def _found_camera_move(bank: CandidateBank, params: CandidateParams, frame: FrameInput) -> CandidateBank:
+    """The last reset found to be a camera move's (``coordination.step``'s ``camera_move_start``: the
+    move was declared after the reset for it): the candidates since are of the moved camera and stay;
+    the previous camera is dropped, and with ``keep_tool_points`` and no leader the model that reset
+    cleared gives its points and its camera before the move, as a camera-move reset would
+    (``_after_reset``)."""
+    bank = replace(bank, previous_x=None, last_reason=frame.reset_reason)
+    c = bank.cleared
+    if not (params.keep_tool_points and bank.leader < 0 and c is not None):
+        return replace(bank, cleared=None)
+    return replace(bank, known_points=c.points, known_corners=c.corners, known_at=c.at, moved_from_x=c.x,
+                   moved_at=float(frame.time), moved_since=c.since, cleared=None, turn=None,
+                   turned_R_WC=None, turned_p_WC=None, turn_rotation_sd=math.inf)
 
 
 def _corners(bank: CandidateBank, points: tuple) -> frozenset:
