@@ -20,6 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import bench_main, failed, metrics_of  # noqa: E402
+from results_page import number  # noqa: E402
 
 # The seeds the chooser was designed on; held out, run once before the clearance (seen since); held
 # out, fixed after it.
@@ -38,15 +39,11 @@ def _by_seed(table) -> dict:
     return seeds
 
 
-def _num(value, fmt: str) -> str:
-    return "-" if value is None else format(value, fmt)
-
-
 def _side(m: dict | None) -> list[str]:
     if m is None:
         return ["-"] * 4
-    return [_num(m["identification_time_s"], ".2f"), _num(m["mass_error_percent"], ".3f"),
-            _num(m["com_error_mm"], ".2f"), _num(m["samples_at_convergence"], "d")]
+    return [number(m["identification_time_s"], ".2f"), number(m["mass_error_percent"], ".3f"),
+            number(m["com_error_mm"], ".2f"), number(m["samples_at_convergence"], "d")]
 
 
 def _median(seeds: dict, excite: bool, figure: str) -> float | None:
@@ -71,10 +68,10 @@ def summary_lines(table) -> list[str]:
             continue
         random, chosen = (_median(part, e, "identification_time_s") for e in (False, True))
         ratio = f"{random / chosen:.2f}x sooner" if random and chosen else "-"
-        errors = ", ".join(f"{f.split('_')[0]} {_num(_median(part, False, f), '.3f')} -> "
-                           f"{_num(_median(part, True, f), '.3f')}" for f in FIGURES[1:3])
-        lines.append(f"- {name} seeds ({len(part)}): median identification {_num(random, '.2f')} s -> "
-                     f"{_num(chosen, '.2f')} s ({ratio}; target >= 2x); median errors random -> chosen: "
+        errors = ", ".join(f"{f.split('_')[0]} {number(_median(part, False, f), '.3f')} -> "
+                           f"{number(_median(part, True, f), '.3f')}" for f in FIGURES[1:3])
+        lines.append(f"- {name} seeds ({len(part)}): median identification {number(random, '.2f')} s -> "
+                     f"{number(chosen, '.2f')} s ({ratio}; target >= 2x); median errors random -> chosen: "
                      f"{errors} (% and mm)")
     return lines
 

@@ -21,10 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import axis_text, bench_main, failed, metrics_of  # noqa: E402
-
-
-def _fmt(value, spec: str = ".2f") -> str:
-    return "-" if value is None else format(value, spec)
+from results_page import number  # noqa: E402
 
 
 def row_text(row) -> str:
@@ -36,10 +33,10 @@ def row_text(row) -> str:
         f"{a['time_s']:.1f} s {a['kind'].split(',')[0]}: {a['camera_position_error_mm']:.2f} / "
         f"{a['camera_rotation_error_deg']:.2f}, {a['tool_point_error_mm']:.2f}" for a in m["adopted"])
     changes = "; ".join(
-        f"{d['kind']} {d['time_s']:.0f} s: {_fmt(d['detection_latency_s'])} s, "
-        f"{_fmt(d['reconvergence_after_detection_s'], '.1f')} s" for d in m["disturbances"])
+        f"{d['kind']} {d['time_s']:.0f} s: {number(d['detection_latency_s'])} s, "
+        f"{number(d['reconvergence_after_detection_s'], '.1f')} s" for d in m["disturbances"])
     alarms = ", ".join(f"{t:.1f} s" for t in m["false_alarms_s"]) or "0"
-    first = _fmt(m["first_convergence_after_found_s"], ".1f")
+    first = number(m["first_convergence_after_found_s"], ".1f")
     return (f"| {row['cell']} | {axis_text(row)} | {first} s | {adoptions or 'none'} | {changes} | {alarms} "
             f"| {row['wall_s']:.0f} s |")
 

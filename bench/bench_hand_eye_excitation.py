@@ -19,6 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import bench_main, failed, metrics_of  # noqa: E402
+from results_page import number  # noqa: E402
 
 from sustain_drake.station.scenario_files import load_scenario_string  # noqa: E402
 
@@ -42,10 +43,6 @@ def _figures(row) -> dict:
             "rotation_deg": None if first is None else first["camera_rotation_error_deg"]}
 
 
-def _num(value, fmt: str) -> str:
-    return "-" if value is None else format(value, fmt)
-
-
 def _median(values: list) -> float | None:
     return None if not values or any(v is None for v in values) else statistics.median(values)
 
@@ -65,8 +62,8 @@ def summary_lines(table) -> list[str]:
         cells = []
         for v in variants:
             f = by_variant.get(v, {})
-            cells += [_num(f.get("after_found_s"), ".1f"),
-                      f"{_num(f.get('position_mm'), '.2f')} / {_num(f.get('rotation_deg'), '.3f')}"]
+            cells += [number(f.get("after_found_s"), ".1f"),
+                      f"{number(f.get('position_mm'), '.2f')} / {number(f.get('rotation_deg'), '.3f')}"]
         lines.append(f"| {seed} | " + " | ".join(cells) + " |")
     base = _median([r.get(variants[0], {}).get("after_found_s") for r in runs.values()]) if variants else None
     for v in variants:
@@ -74,9 +71,10 @@ def summary_lines(table) -> list[str]:
                    for k in ("after_found_s", "position_mm", "rotation_deg")}
         t = medians["after_found_s"]
         ratio = f"{base / t:.2f}x sooner than {variants[0]}" if base and t else "-"
-        lines.append(f"- {v} ({len(runs)} runs): median first convergence {_num(t, '.2f')} s after the "
+        lines.append(f"- {v} ({len(runs)} runs): median first convergence {number(t, '.2f')} s after the "
                      f"point was found ({ratio}; target >= 2x); median first camera "
-                     f"{_num(medians['position_mm'], '.2f')} mm / {_num(medians['rotation_deg'], '.3f')} deg")
+                     f"{number(medians['position_mm'], '.2f')} mm / "
+                     f"{number(medians['rotation_deg'], '.3f')} deg")
     return lines
 
 

@@ -19,10 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import axis_text, bench_main, failed, metrics_of  # noqa: E402
-
-
-def _num(value, fmt: str) -> str:
-    return "-" if value is None else format(value, fmt)
+from results_page import number  # noqa: E402
 
 
 def row_text(row) -> str:
@@ -30,9 +27,9 @@ def row_text(row) -> str:
         return f"| {axis_text(row)} | failed: {row['error']} | | | | | | |"
     m = metrics_of(row, "kinesthetic")
     t = m["touch"]
-    cells = [axis_text(row), _num(m["identification_time_s"], ".2f"),
-             _num(m.get("mass_error_percent"), ".3f"), _num(m.get("com_error_mm"), ".2f"),
-             f"{_num(t['median_mm'], '.2f')} / {_num(t['max_mm'], '.2f')}",
+    cells = [axis_text(row), number(m["identification_time_s"], ".2f"),
+             number(m.get("mass_error_percent"), ".3f"), number(m.get("com_error_mm"), ".2f"),
+             f"{number(t['median_mm'], '.2f')} / {number(t['max_mm'], '.2f')}",
              str(t.get("touches_felt", "-")), str(t["false_touch_samples"]), str(m["change_detections"])]
     return "| " + " | ".join(cells) + " |"
 

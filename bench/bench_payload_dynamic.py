@@ -52,7 +52,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, ZeroOrderHold
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_page import publish  # noqa: E402  (bench/results_page.py)
+from results_page import number, publish  # noqa: E402  (bench/results_page.py)
 
 from sustain_drake.experiments.hand_eye import connect_station_wrench  # noqa: E402
 from sustain_drake.experiments.kinesthetic import add_exciting_postures  # noqa: E402
@@ -298,15 +298,10 @@ def runs_of(seeds: list[int]) -> list[Run]:
     return runs
 
 
-def _num(value, spec: str) -> str:
-    missing = value is None or (isinstance(value, float) and not math.isfinite(value))
-    return "-" if missing else format(value, spec)
-
-
 def row(run: Run, estimator: str, o: Outcome) -> str:
     e = o.errors or {}
-    cells = [run.name, estimator, _num(o.identified, ".2f")]
-    cells += [_num(e.get(key), spec) for key, spec in _FIGURES] + [_num(o.within, ".2f")]
+    cells = [run.name, estimator, number(o.identified, ".2f")]
+    cells += [number(e.get(key), spec) for key, spec in _FIGURES] + [number(o.within, ".2f")]
     if o.identified is None:
         cells[3] = f"not identified: {o.reason}" if o.reason else "not identified"
     return "| " + " | ".join(cells) + " |"
@@ -329,7 +324,7 @@ def summary(results: list[tuple[Run, str, Outcome]]) -> list[str]:
         cells = [estimator, f"{len(said)} of {len(outcomes)}", _span([o.identified for o in said], ".2f")]
         for key, spec in _FIGURES:
             values = [o.errors[key] for o in said if o.errors and key in o.errors]
-            cells.append(_num(max(values), spec) if values else "-")
+            cells.append(number(max(values), spec) if values else "-")
         cells.append(f"{sum(within(o.errors) for o in said)} of {len(outcomes)}")
         entered = [o.within for o in outcomes if o.within is not None]
         cells.append(_span(entered, ".2f") + ("" if len(entered) == len(outcomes) else

@@ -22,9 +22,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pandas as pd  # noqa: E402
-from bench_hand_eye import _fmt  # noqa: E402
 from common import bench_main, failed, metrics_of  # noqa: E402
 from make_scene_matrix import design, second_arm_design  # noqa: E402
+from results_page import number  # noqa: E402
 
 from sustain_drake.sweeps import every_target_met  # noqa: E402
 
@@ -70,12 +70,12 @@ def row_maker(cells: list[dict]):
             f"{a['camera_rotation_error_deg']:.2f}, {a['tool_point_error_mm']:.1f}" for a in m["adopted"])
         changes = "; ".join(
             f"{d['kind'].replace('tool_', '').replace('head_', '')} {d['time_s']:.0f} s: "
-            f"{_fmt(d['detection_latency_s'])} s, {_fmt(d['reconvergence_after_detection_s'], '.1f')} s"
+            f"{number(d['detection_latency_s'])} s, {number(d['reconvergence_after_detection_s'], '.1f')} s"
             for d in m["disturbances"])
         in_use = (m.get("tool_point_in_use_worst") or {}).get("error_mm")
-        return (f"| {row['cell']} | {scene} | {_fmt(m['first_convergence_after_found_s'], '.1f')} s "
+        return (f"| {row['cell']} | {scene} | {number(m['first_convergence_after_found_s'], '.1f')} s "
                 f"| {adoptions or 'none'} | {changes} | {m['num_false_alarms']} "
-                f"| {m.get('num_wrong_adoptions', '-')} | {_fmt(in_use, '.1f')} "
+                f"| {m.get('num_wrong_adoptions', '-')} | {number(in_use, '.1f')} "
                 f"| {'yes' if _met_all(row) else 'no'} |")
 
     return row_text

@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_page import publish  # noqa: E402
+from results_page import number, publish  # noqa: E402
 
 from sustain_drake.experiments.log_spool import log_sinks  # noqa: E402
 from sustain_drake.files import write_atomically  # noqa: E402
@@ -103,10 +103,6 @@ def _verdict(ok: bool) -> str:
     return "met" if ok else "**not met**"
 
 
-def _fmt(value, spec: str = ".2f") -> str:
-    return "-" if value is None else format(value, spec)
-
-
 def _size(d, drawn) -> str:
     """A disturbance's size, from the scenario's draw at its time."""
     match = [x for x in drawn if abs(x.time - d["time_s"]) < 1e-6]
@@ -155,8 +151,8 @@ def report(args) -> list[str]:
         camera = ("-" if a is None
                   else f"{a['camera_position_error_mm']:.2f} / {a['camera_rotation_error_deg']:.3f}")
         lines.append(f"| {d['time_s']:.1f} s | {d['kind']} | {_size(d, drawn)} | "
-                     f"{_fmt(d['detection_latency_s'])} s ({d['detected_by'] or 'not detected'}) | "
-                     f"{_fmt(d['reconvergence_after_detection_s'], '.1f')} s | {camera} |")
+                     f"{number(d['detection_latency_s'])} s ({d['detected_by'] or 'not detected'}) | "
+                     f"{number(d['reconvergence_after_detection_s'], '.1f')} s | {camera} |")
     lines += [""] + totals(he, happened, memory, end)
     return lines
 
@@ -180,14 +176,14 @@ def totals(he: dict, happened: list[dict], memory: dict, end: float) -> list[str
         + ("never" if first is None else f"at {first['time_s']:.1f} s "
            f"({first['camera_position_error_mm']:.2f} mm / {first['camera_rotation_error_deg']:.3f} deg)"),
         f"- detected within 1 s: {len(detected)} of {n} ({_verdict(len(detected) == n)}; worst measured "
-        f"{_fmt(max((x for x in latencies if x is not None), default=None))} s)",
+        f"{number(max((x for x in latencies if x is not None), default=None))} s)",
         f"- re-converged within 15 s of the detection: {len(settled)} of {n} "
         f"({_verdict(len(settled) == n)}; worst measured "
-        f"{_fmt(max((x for x in reconv if x is not None), default=None), '.1f')} s)",
+        f"{number(max((x for x in reconv if x is not None), default=None), '.1f')} s)",
         f"- false alarms: {he['num_false_alarms']} ({_verdict(he['num_false_alarms'] == 0)}"
         + (f": at {', '.join(f'{t:.1f} s' for t in he['false_alarms_s'])})" if he["false_alarms_s"] else ")"),
         f"- adopted camera within 2 mm / 0.2 deg after each re-convergence: {len(good)} of {n} "
-        f"({_verdict(len(good) == n)}; worst {_fmt(worst_mm)} mm / {_fmt(worst_deg, '.3f')} deg); every "
+        f"({_verdict(len(good) == n)}; worst {number(worst_mm)} mm / {number(worst_deg, '.3f')} deg); every "
         f"adoption of the run: {len(he['adopted'])}, wrong adoptions {he['num_wrong_adoptions']}",
     ]
     return lines + memory_lines(memory, end)

@@ -3,6 +3,7 @@ made it and the commit it ran on. No heavy imports, so any bench can use it."""
 
 from __future__ import annotations
 
+import math
 import shlex
 import sys
 import time
@@ -13,6 +14,12 @@ from sustain_drake.provenance import source_commit
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS_PAGE = ROOT / "docs" / "results.md"
+
+
+def number(value, spec: str = ".2f") -> str:
+    """A figure of a table: ``value`` formatted with ``spec``; "-" when there is none (None, NaN, inf)."""
+    missing = value is None or (isinstance(value, float) and not math.isfinite(value))
+    return "-" if missing else format(value, spec)
 
 
 def publish(section: str, lines: list[str], page: Path = RESULTS_PAGE, commit: str | None = None) -> None:

@@ -32,6 +32,11 @@ PATH_CHECK_STEP = 0.05
 MOVE_POINTS = 8
 
 
+def move_times(duration: float) -> np.ndarray:
+    """s: the ``MOVE_POINTS`` midpoints of as many equal parts of a move lasting ``duration`` s."""
+    return (np.arange(MOVE_POINTS) + 0.5) / MOVE_POINTS * duration
+
+
 class Clearance(NamedTuple):
     """What the chosen moves keep clear: along the move (checked every ``PATH_CHECK_STEP`` of the
     largest joint's travel), no collision geometry of ``geometries`` (e.g. the held object's) comes
@@ -151,7 +156,7 @@ class ExcitingPostures(LeafSystem):
         q, v = plant.GetPositions(plant_context), np.zeros(plant.num_velocities())
         g_W, p_KoK = plant.gravity_field().gravity_vector(), np.zeros(3)
         vdot, rows = np.zeros_like(v), []
-        for s in (np.arange(MOVE_POINTS) + 0.5) / MOVE_POINTS * duration:
+        for s in move_times(duration):
             q_arm, v_arm = quintic(q_now, goal, duration, s)
             q[self._positions], v[self._velocities] = q_arm, v_arm  # the other joints at rest
             vdot[self._velocities] = quintic_acceleration(q_now, goal, duration, s)
@@ -240,8 +245,7 @@ class HandEyePostures:
         pace, visible, paths, durations = self._pace, [], [], []
         for i, goal in enumerate(goals):
             T = move_duration(q_now, goal, pace.max_speed, pace.min_duration)
-            times = (np.arange(MOVE_POINTS) + 0.5) / MOVE_POINTS * T
-            postures = [quintic(q_now, goal, T, s)[0] for s in times]
+            postures = [quintic(q_now, goal, T, s)[0] for s in move_times(T)]
             X_WH = []
             for posture in [*postures, goal]:
                 q[self._positions] = posture
