@@ -151,17 +151,17 @@ class CoordinationStateMachine(LeafSystem):
                                                sample_error=float(sample_error), **verdict)
         new, event = coordination.step(self._vector(context), self._rule, context.get_time(), report,
                                        **optional)
+        old_reason = self._vector(context)[coordination.RESET_REASON]
         state.get_mutable_discrete_state(self._state).set_value(new)
-        camera_moved = (new[coordination.RESET_REASON] == coordination.CAMERA_MOVED
-                        and self._vector(context)[coordination.RESET_REASON] != coordination.CAMERA_MOVED)
         if event is not None:
             state.get_mutable_abstract_state(self._events).set_value(self.events(context) + (event,))
             if event.kind in (coordination.CONVERGED, coordination.REFINED):
                 state.get_mutable_abstract_state(self._adopted).set_value(solution)
                 state.get_mutable_discrete_state(self._adopted_x).set_value(solution.x)
-            elif new[coordination.RESET_REASON] == coordination.CAMERA_MOVED:  # a change detection
-                camera_moved = True
-        if camera_moved:  # a change detection, or the last one found to be a camera move
+        # A camera move detected now, or the last reset found to have been one.
+        detected = event is not None and event.kind == coordination.CHANGE_DETECTED
+        if new[coordination.RESET_REASON] == coordination.CAMERA_MOVED and (
+                detected or old_reason != coordination.CAMERA_MOVED):
             # The camera is known to have moved: its model is dropped, not offered again as the
             # "previous camera" that a slipped tool would leave in place.
             state.get_mutable_abstract_state(self._adopted).set_value(None)

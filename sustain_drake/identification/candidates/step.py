@@ -91,8 +91,7 @@ def _after_reset(bank: CandidateBank, params: CandidateParams, frame: FrameInput
         known, corners = model_points(bank, params), None  # the camera moved, the tool did not
         moved, known_at = (bank.model_x, float(time), bank.reset_time), float(time)
     elif camera_moved and params.keep_tool_points and bank.leader < 0 and bank.cleared is not None:
-        c = bank.cleared
-        known, corners, moved, known_at = c.points, c.corners, (c.x, float(time), c.since), c.at
+        known, corners, moved, known_at = _moved_from(bank.cleared, time)
     elif previous is not None or bank.leader >= 0:
         moved = (None, math.nan, -math.inf)
         if has_model:
@@ -118,13 +117,20 @@ def _found_camera_move(bank: CandidateBank, params: CandidateParams, frame: Fram
     the previous camera is dropped, and with ``keep_tool_points`` and no leader the model that reset
     cleared gives its points and its camera before the move, as a camera-move reset would
     (``_after_reset``)."""
-    bank = replace(bank, previous_x=None, last_reason=frame.reset_reason)
-    c = bank.cleared
-    if not (params.keep_tool_points and bank.leader < 0 and c is not None):
-        return replace(bank, cleared=None)
-    return replace(bank, known_points=c.points, known_corners=c.corners, known_at=c.at, moved_from_x=c.x,
-                   moved_at=float(frame.time), moved_since=c.since, cleared=None, turn=None,
-                   turned_R_WC=None, turned_p_WC=None, turn_rotation_sd=math.inf)
+    cleared = bank.cleared
+    bank = replace(bank, previous_x=None, last_reason=frame.reset_reason, cleared=None)
+    if not (params.keep_tool_points and bank.leader < 0 and cleared is not None):
+        return bank
+    known, corners, moved, known_at = _moved_from(cleared, frame.time)
+    return replace(bank, known_points=known, known_corners=corners, known_at=known_at, moved_from_x=moved[0],
+                   moved_at=moved[1], moved_since=moved[2], turn=None, turned_R_WC=None, turned_p_WC=None,
+                   turn_rotation_sd=math.inf)
+
+
+def _moved_from(cleared: ClearedModel, time: float) -> tuple:
+    """``(known points, their corners, (camera before the move, now, since), known_at)``: what a
+    camera move found after another reset takes from the model that reset cleared."""
+    return cleared.points, cleared.corners, (cleared.x, float(time), cleared.since), cleared.at
 
 
 def _corners(bank: CandidateBank, points: tuple) -> frozenset:
