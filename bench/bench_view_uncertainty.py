@@ -44,10 +44,10 @@ def row(t: float, candidates, bank, X_WC) -> dict | None:
         return None
     best = max(ready, key=lambda c: c.solution.num_samples)
     solution = identifier_of(best, candidates.criteria, 1.0).solve(refine_estimate=True)
-    joint, statistics = joint_refined(replace(best, solution=solution), bank.candidates, bank.archive,
-                                      candidates.params)
+    joint, statistics, independent = joint_refined(replace(best, solution=solution), bank.candidates,
+                                             bank.archive, candidates.params)
     estimate = joint.solution.estimate
-    sd = joint_camera_sd(statistics, estimate, candidates.params)
+    sd = joint_camera_sd(statistics, estimate, candidates.params, independent)
     if sd is None:
         return None
     return {"time": t, "samples": solution.num_samples, "points": len(statistics),

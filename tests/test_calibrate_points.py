@@ -15,6 +15,7 @@ from sustain_drake.identification import (
     observability,
 )
 from sustain_drake.identification import eye_to_hand_points as points
+from sustain_drake.identification.errors import IdentificationError
 
 P_HP = np.array([[0.05, 0.02, 0.12], [-0.08, 0.04, 0.10], [0.0, -0.09, 0.15]])  # m, in the hand
 
@@ -247,3 +248,50 @@ def test_points_given_the_true_camera_are_the_true_points():
     R, p_WC, P, weights = points.refine_joint_weighted(statistics, truth.X_WC[:3, :3], truth.X_WC[:3, 3])
     np.testing.assert_allclose(P, P_HP, atol=1e-9)
     assert np.abs(p_WC - truth.X_WC[:3, 3]).max() <= 1e-9 and np.allclose(weights, 1.0)  # noise-free: alike
+
+
+def _three_point_fit(n: int = 60, seed: int = 4):
+    truth = make_truth(6)
+    p_HP = np.array([[0.05, 0.02, 0.12], [-0.08, 0.04, 0.10], [0.0, -0.09, 0.15]])
+    data, X_WH = make_points(truth, p_HP, n, noise_m=1e-3, seed=seed)
+    S_list = []
+    for samples, p_C in data.values():
+        identifier = EyeToHandIdentifier()
+        for c, X in zip(p_C, X_WH[samples], strict=True):
+            identifier.add(c, X[:3, :3], X[:3, 3])
+        S_list.append(identifier.core.S)
+    R, p_WC, P = points.refine_joint(S_list, truth.X_WC[:3, :3], truth.X_WC[:3, 3], p_HP)
+    return truth, S_list, R, p_WC, P
+
+
+def test_fewer_independent_samples_widen_the_joint_covariance_by_the_degrees_of_freedom_ratio():
+    """``independent``: point k's statistic weighs ``independent_k / n_k``; with every point at a
+    quarter, ``H`` and the residual sum are a quarter each, so the covariance grows by the ratio
+    of the degrees of freedom; as many independent samples as samples (or more) change nothing."""
+    _, S_list, R, p_WC, P = _three_point_fit()
+    n = np.array([S[9, 9] for S in S_list])
+    full = points.joint_covariance(S_list, R, p_WC, P)
+    for all_of_them in (n, 2 * n):
+        same = points.joint_covariance(S_list, R, p_WC, P, independent=all_of_them)
+        np.testing.assert_allclose(same, full, rtol=1e-12)
+    quarter = points.joint_covariance(S_list, R, p_WC, P, independent=n / 4)
+    dof, dof_quarter = 3 * n.sum() - 6 - 9, 3 * n.sum() / 4 - 6 - 9
+    np.testing.assert_allclose(quarter, full * dof / dof_quarter, rtol=1e-9)
+    assert points.joint_covariance(S_list, R, p_WC, P, independent=[1.0, 1.0, 1.0]) is None  # 9 < 15
+    for bad in ([1.0, -1.0, 1.0], [1.0, np.nan, 1.0], [1.0, 1.0]):
+        with pytest.raises(IdentificationError, match="independent must be (3 positive numbers|finite)"):
+            points.joint_covariance(S_list, R, p_WC, P, independent=bad)
+
+
+def test_the_position_given_the_rotation_counts_independent_samples_in_its_covariance_only():
+    truth, S_list, R, _, _ = _three_point_fit()
+    found = points.position_and_points_given_rotation(S_list, truth.X_WC[:3, :3])
+    assert np.linalg.norm(found.p_WC - truth.X_WC[:3, 3]) < 3e-3
+    n = np.array([S[9, 9] for S in S_list])
+    quarter = points.position_and_points_given_rotation(S_list, truth.X_WC[:3, :3], independent=n / 4)
+    np.testing.assert_allclose(quarter.p_WC, found.p_WC, rtol=1e-12)  # the fit weighs every sample
+    np.testing.assert_allclose(quarter.mean_squared_errors, found.mean_squared_errors, rtol=1e-12)
+    dof, dof_quarter = 3 * n.sum() - 3 - 9, 3 * n.sum() / 4 - 3 - 9
+    np.testing.assert_allclose(quarter.covariance, found.covariance * dof / dof_quarter, rtol=1e-9)
+    with pytest.raises(IdentificationError, match="independent must be 3 positive numbers"):
+        points.position_and_points_given_rotation(S_list, truth.X_WC[:3, :3], independent=[0.0, 1.0, 1.0])

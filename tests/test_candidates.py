@@ -683,7 +683,7 @@ def test_stitching_tracks_of_one_point_pins_the_camera_and_keeps_other_marks_apa
               weak_track(4, p_other, [0.4, 0.0, 0.0], 0.02, rng)]
     errors = {}
     for radius in (0.0, 0.005):
-        best, points = candidates.fitting.joint_refined(leader, tracks, [], CandidateParams(joint=True,
+        best, points, _ = candidates.fitting.joint_refined(leader, tracks, [], CandidateParams(joint=True,
                                                                                     stitch_radius=radius))
         assert len(points) == (4 if radius == 0 else 2)  # stitched: the tracks of P_TOOL are one point
         est = best.solution.estimate
@@ -1103,7 +1103,7 @@ def test_joint_consistency_leaves_out_a_point_with_an_error_of_its_own():
     assert rms[1] < 1.3 * rms[0] and 2.0 * rms[0] < rms[2] < 3.0 * rms[0]
     errors = {}
     for consistency, members in ((3.0, 3), (2.0, 2)):
-        best, points = candidates.fitting.joint_refined(leader, [good, stray], [], CandidateParams(
+        best, points, _ = candidates.fitting.joint_refined(leader, [good, stray], [], CandidateParams(
             joint=True, joint_consistency=consistency))
         assert len(points) == members
         errors[consistency] = np.linalg.norm(best.solution.estimate.p_WC - TRUTH.X_WC[:3, 3])
@@ -1126,7 +1126,7 @@ def test_joint_weighted_trusts_each_point_by_its_own_error():
                   tracked(3, P_TOOL + [-0.02, 0.03, 0.05], rng, noise=0.5e-3),
                   tracked(4, P_TOOL + [0.0, 0.03, 0.02], rng, noise=3e-3)]
         for weighted in (False, True):
-            best, points = candidates.fitting.joint_refined(leader, others, [], CandidateParams(
+            best, points, _ = candidates.fitting.joint_refined(leader, others, [], CandidateParams(
                 joint=True, joint_consistency=10.0, joint_weighted=weighted))
             assert len(points) == 4
             est = best.solution.estimate
@@ -1230,3 +1230,42 @@ def test_an_anchored_point_asks_for_more_motion_only_where_the_frame_shows_few_s
     assert bank.find(4).solution.num_samples >= 30 and not bank.more_motion
     bank, _ = run(lambda k, X, rng: frames(k, X, rng, False), params=params)
     assert bank.more_motion
+
+
+def test_a_candidate_counts_its_distinct_views_not_its_samples():
+    """``view_angle``: a held view is one view however many samples it gives; a turn of the hand by
+    more than the angle is a new one; coming back to a view seen before, or to within the angle of
+    one, adds to that view's sums."""
+    rng = np.random.default_rng(4)
+
+    def fed(params, angles, frames=10):
+        c = None
+        for k in range(frames * len(angles)):
+            X = hand_pose(0)
+            X[:3, :3] = X[:3, :3] @ Rotation.from_rotvec([0.0, 0.0, angles[k // frames]]).as_matrix()
+            p = seen(X, P_TOOL, rng, noise=1e-5)
+            c = (candidates.admission.admit(5, CRITERIA, k * DT, p, X) if c is None else
+                 candidates.admission.feed(c, params, CRITERIA, k * DT, p, X, 1.0, False))
+        return c
+
+    angles = [0.0, 0.03, 0.08, 0.0, 0.08, 0.16]
+    c = fed(replace(PARAMS, view_angle=0.05), angles)
+    assert c.solution.num_samples == 60 and len(c.view_list) == 3  # 0, 0.08 and 0.16 rad
+    np.testing.assert_array_equal(c.view_sums[:, 0], [30, 20, 10])  # 0.03 is within 0.05 of 0
+    assert candidates.fitting.S_of(c.statistic)[9, 9] == c.view_sums[:, 0].sum()  # every sample in a view
+    np.testing.assert_allclose(c.view_sums[2, 1:4], c.sampled_p_CP * 10, atol=1e-3)  # the last view's
+    plain = fed(PARAMS, angles)
+    assert len(plain.view_list) == 1  # view_angle 0: views are not kept, every sample counts
+    R_WC, p_WC = TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3]
+    assert candidates.fitting.independent_of([plain], R_WC, p_WC, PARAMS) == [60.0]
+
+
+def test_the_view_distance_adds_the_hands_turn_and_the_rays_angle():
+    X = hand_pose(3)
+    view = candidates.admission.view_of([0.0, 0.0, 1.0], X)
+    Y = X.copy()
+    Y[:3, :3] = X[:3, :3] @ Rotation.from_rotvec([0.02, 0.0, 0.0]).as_matrix()
+    other = candidates.admission.view_of([math.sin(0.03), 0.0, math.cos(0.03)], Y)
+    assert candidates.admission.view_distance(view[None, :], other)[0] == pytest.approx(0.05, abs=1e-9)
+    pairwise = candidates.admission.view_distance(np.array([view, other]), np.array([other, other]))
+    np.testing.assert_allclose(pairwise, [0.05, 0.0], atol=1e-6)

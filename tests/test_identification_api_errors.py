@@ -35,6 +35,7 @@ from sustain_drake.identification import (
     rotation,
     sustainable_identifier,
     touch,
+    view_correlation,
 )
 from sustain_drake.identification import (
     eye_to_hand_points as points,
@@ -62,8 +63,17 @@ def _filled_eye() -> EyeToHandIdentifier:
     return ident
 
 
+def _views_of_filled_eye() -> np.ndarray:
+    """``_filled_eye``'s 20 samples as 4 views of 5 (``view_correlation.view_row`` sums)."""
+    rng = np.random.default_rng(3)
+    rows = [view_correlation.view_row(rng.normal(size=3), q, rng.normal(size=3))
+            for q in Rotation.random(20, random_state=rng).as_matrix()]
+    return np.array(rows).reshape(4, 5, -1).sum(axis=1)
+
+
 EYE = _filled_eye()
 S16, WEIGHT = EYE.core.S, EYE.core.weight
+VIEWS = _views_of_filled_eye()
 _PAYLOAD = PayloadIdentifier()
 for _q in Rotation.random(12, random_state=np.random.default_rng(6)).as_matrix():
     _f = _q.T @ [0.0, 0.0, 5.0]
@@ -120,7 +130,13 @@ TARGETS = {
     "eye_to_hand_points.spread_off_line": (points.spread_off_line, (0.01 * np.eye(3),)),
     "eye_to_hand_points.points_given_camera": (points.points_given_camera, ([S16], R, P)),
     "eye_to_hand_points.refine_joint_weighted": (points.refine_joint_weighted, ([S16, S16], R, P, 10, 1e-3)),
-    "eye_to_hand_points.joint_covariance": (points.joint_covariance, ([S16, S16], R, P, [P2, P2], None)),
+    "eye_to_hand_points.joint_covariance": (points.joint_covariance,
+                                            ([S16, S16], R, P, [P2, P2], None, False, [5.0, 5.0])),
+    "eye_to_hand_points.position_and_points_given_rotation": (points.position_and_points_given_rotation,
+                                                              ([S16, S16], R, [5.0, 5.0])),
+    "view_correlation.view_row": (view_correlation.view_row, (P, R, P2)),
+    "view_correlation.repeated_share": (view_correlation.repeated_share, (VIEWS, S16, R, P, P2)),
+    "view_correlation.independent_samples": (view_correlation.independent_samples, (VIEWS, S16, R, P, P2)),
     "camera_turn.camera_after_turn": (camera_turn.camera_after_turn,
                                       (R, P, camera_turn.TurnAnchors(B0, Q0, B1), [], [], 5, 2, 1e-3)),
     "PayloadIdentifier": (PayloadIdentifier, (G, 1.0, None)),
@@ -182,7 +198,7 @@ def test_every_valid_call_works():
 
 def test_every_public_function_and_class_is_a_target():
     for module in (sustainable_identifier, eye_to_hand, payload, batch, rotation, touch, coordination,
-                   observability, camera_turn):
+                   observability, camera_turn, view_correlation):
         for attr, value in vars(module).items():
             if attr.startswith("_") or getattr(value, "__module__", None) != module.__name__:
                 continue
@@ -313,6 +329,17 @@ BAD_CALLS = [
     _bad("eye_to_hand_points.joint_covariance", 3, [P2], "p_HP"),
     _bad("eye_to_hand_points.joint_covariance", 4, [1.0, -1.0], "weights"),
     _bad("eye_to_hand_points.joint_covariance", 4, [1.0, np.nan], "weights"),
+    _bad("eye_to_hand_points.joint_covariance", 6, [1.0, 0.0], "independent"),
+    _bad("eye_to_hand_points.joint_covariance", 6, [1.0], "independent"),
+    _bad("view_correlation.repeated_share", 0, VIEWS[:, :15], "views"),
+    _bad("view_correlation.repeated_share", 0, -VIEWS, "views"),
+    _bad("view_correlation.independent_samples", 0, "views", "views"),
+    _bad("view_correlation.independent_samples", 1, S16[:15], "S"),
+    _bad("view_correlation.independent_samples", 2, SCALED, "R_WC"),
+    _bad("view_correlation.independent_samples", 4, [0.0, np.nan, 0.0], "p_HP"),
+    _bad("eye_to_hand_points.position_and_points_given_rotation", 2, [1.0, -2.0], "independent"),
+    _bad("eye_to_hand_points.position_and_points_given_rotation", 2, "two", "independent"),
+    _bad("eye_to_hand_points.position_and_points_given_rotation", 0, [], "at least one statistic"),
     _bad("camera_turn.camera_after_turn", 0, None, "R_WC0"),
     _bad("camera_turn.camera_after_turn", 2, camera_turn.TurnAnchors(ZERO_ROW, Q0, B1), "b0"),
     _bad("camera_turn.camera_after_turn", 2, camera_turn.TurnAnchors(B0, Q0[:5], B1), "q0"),

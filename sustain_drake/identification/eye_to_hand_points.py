@@ -183,40 +183,45 @@ class PositionAndPoints(NamedTuple):
     mean_squared_errors: np.ndarray
 
 
-def position_and_points_given_rotation(S_list: list[np.ndarray], R_WC: np.ndarray):
+def position_and_points_given_rotation(S_list: list[np.ndarray], R_WC: np.ndarray, independent=None):
     """The camera position and every point's ``p_HP`` that best explain K points' samples (``S_k``,
     raw statistics) when the camera's rotation ``R_WC`` is known: Eq. (35)'s least squares in
     ``p_WC`` and the ``p_HP`` together, linear (3 + 3K unknowns). Each ``p_HP`` is eliminated
     (``p_HP = -S_qq^-1 (S_qp p_WC + S_qc c)``, ``c = [vec R_WC; 1]``), leaving the 3 x 3 Schur
-    complement ``H`` in ``p_WC``; the position's covariance is ``s^2 H^-1`` with ``s^2`` the residual
-    sum over its ``3 n - 3 - 3K`` degrees of freedom (``n`` samples in all). The hand must turn: a
-    translation moves ``p_WC`` and every ``p_HP`` alike. Returns a ``PositionAndPoints``, or None
-    when ``H`` is singular (the hand did not turn) or there are too few samples for the degrees of
-    freedom. IdentificationError unless ``S_list`` is a non-empty list of finite 16 x 16 statistics
-    and ``R_WC`` a finite 3 x 3 matrix."""
+    complement ``H = sum_k H_k`` in ``p_WC``; the position's covariance is ``s^2 H^-1`` with ``s^2``
+    the residual sum over its ``3 n - 3 - 3K`` degrees of freedom (``n`` samples in all), each point
+    counting its ``independent`` samples (K positive numbers, None: all; as in
+    ``joint_covariance``) in ``H``, ``s^2`` and ``n``; the fit itself weighs every sample alike.
+    The hand must turn: a translation moves ``p_WC`` and every ``p_HP`` alike. Returns a
+    ``PositionAndPoints``, or None when ``H`` is singular (the hand did not turn) or there are too
+    few (independent) samples for the degrees of freedom. IdentificationError unless ``S_list`` is
+    a non-empty list of finite 16 x 16 statistics, ``R_WC`` a finite 3 x 3 matrix and
+    ``independent`` None or K finite positive numbers."""
     S_list = _statistics(S_list)
     if not S_list:
         raise IdentificationError("position_and_points_given_rotation needs at least one statistic")
     R_WC = real_array("R_WC", R_WC, MATRIX3)
+    factors = _independent_shares(S_list, independent)
     c = np.concatenate([R_WC.reshape(9, order="F"), [1.0]])
     fixed = np.r_[0:9, 15]
-    H, g, eliminations = np.zeros((3, 3)), np.zeros(3), []
+    H_k, g, eliminations = [], np.zeros(3), []
     for S in S_list:
         S_qq = S[12:15, 12:15]
         if not S[9, 9] > 0.0:
             return None
         solve_q = np.linalg.solve(S_qq, np.column_stack([S[12:15, 9:12], S[12:15, fixed] @ c]))
-        H += S[9:12, 9:12] - S[9:12, 12:15] @ solve_q[:, :3]
+        H_k.append(S[9:12, 9:12] - S[9:12, 12:15] @ solve_q[:, :3])
         g += S[9:12, fixed] @ c - S[9:12, 12:15] @ solve_q[:, 3]
         eliminations.append(solve_q)
-    n = float(sum(S[9, 9] for S in S_list))
-    dof = 3.0 * n - 3.0 - 3.0 * len(S_list)
+    H = np.sum(H_k, axis=0)
+    dof = 3.0 * float((factors * _counts(S_list)).sum()) - 3.0 - 3.0 * len(S_list)
     if not (dof > 0 and np.linalg.cond(H) < 1e12):
         return None
     p_WC = -np.linalg.solve(H, g)
     P = np.array([-(q[:, :3] @ p_WC + q[:, 3]) for q in eliminations])
     squared = _squared_errors(S_list, R_WC, p_WC, P)
-    covariance = float(squared.sum()) / dof * np.linalg.inv(H)
+    information = np.sum([f * Hk for f, Hk in zip(factors, H_k, strict=True)], axis=0)
+    covariance = float((factors * squared).sum()) / dof * np.linalg.inv(information)
     return PositionAndPoints(p_WC, P, covariance, squared / _counts(S_list))
 
 
@@ -304,6 +309,27 @@ def _counts(S_list: list[np.ndarray]) -> np.ndarray:
     return np.array([float(S[9, 9]) for S in S_list])
 
 
+def _positive_numbers(name: str, value, K: int) -> np.ndarray:
+    """``value`` checked as K finite positive numbers (None: K ones)."""
+    if value is None:
+        return np.ones(K)
+    a = real_array(name, value, (K,), what=f"{K} positive numbers")
+    if not np.all(a > 0.0):
+        raise IdentificationError(f"{name} must be {K} positive numbers, got {describe(value)}")
+    return a
+
+
+def _independent_shares(S_list: list[np.ndarray], independent) -> np.ndarray:
+    """Per point, the share of its samples that count as independent: ``independent / samples``,
+    at most 1 (``independent``: K positive numbers, None: all). ``m`` samples that carry one
+    repeated error inform a covariance as one sample, not ``m``."""
+    if independent is None:
+        return np.ones(len(S_list))
+    v = _positive_numbers("independent", independent, len(S_list))
+    counts = _counts(S_list)
+    return np.where(counts > 0.0, np.minimum(v / np.maximum(counts, 1e-300), 1.0), 1.0)
+
+
 def _squared_errors(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray):
     """Each point's sum of squared Eq. (30) residuals ``x_k^T S_k x_k`` (m^2, >= 0)."""
     return np.array([max(float(x @ S @ x), 0.0)
@@ -377,7 +403,8 @@ def refine_joint_weighted(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndar
 
 
 def joint_covariance(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, p_HP: np.ndarray,
-                     weights=None, points_known: bool = False) -> np.ndarray | None:  # fmt: skip
+                     weights=None, points_known: bool = False,
+                     independent=None) -> np.ndarray | None:  # fmt: skip
     """Gauss-Newton's covariance ``sigma^2 H^-1`` ((6 + 3K) x (6 + 3K)) of the joint fit of K points'
     raw statistics at the camera ``(R, p_WC)`` and the points ``p_HP`` (K x 3; the fit's optimum), in
     ``(omega, p_WC, p_HP_1, ..., p_HP_K)``: ``omega`` the camera's turn in its own frame (rad; the truth
@@ -387,20 +414,24 @@ def joint_covariance(S_list: list[np.ndarray], R: np.ndarray, p_WC: np.ndarray, 
     1 and each point counts with its own noise; one point with weight 1 gives
     ``observability.eye_to_hand_covariance``. ``weights``: K positive numbers (None: all 1).
     ``points_known``: the ``p_HP`` are given, not fitted (``camera_given_points``): the camera's
-    6 x 6 covariance alone, from its block of ``H``, with ``3 n - 6`` degrees of freedom. None if
+    6 x 6 covariance alone, from its block of ``H``, with ``3 n - 6`` degrees of freedom.
+    ``independent``: K positive numbers, each point's samples counted as independent ones (None:
+    all; ``_independent_shares``): errors that repeat from sample to sample inform less than as many
+    independent ones, so point k's statistic weighs ``independent_k / n_k`` in ``H``, ``sigma^2``
+    and ``n``. None if
     the fit is undetermined or ``3 n <= 6 + 3K`` (``3 n <= 6``). IdentificationError unless
     ``S_list`` is a list of finite 16 x 16 statistics, ``R`` a rotation matrix, ``p_WC`` a finite
-    3-vector, ``p_HP`` K finite points and ``weights`` None or K finite positive numbers."""
+    3-vector, ``p_HP`` K finite points and ``weights`` and ``independent`` None or K finite
+    positive numbers."""
     S_list = _statistics(S_list)
     K = len(S_list)
     R, p_WC, p_HP = rotation("R", R), real_array("p_WC", p_WC, VECTOR3), _points("p_HP", p_HP, K)
-    w = np.ones(K) if weights is None else real_array("weights", weights, (K,), what=f"{K} positive numbers")
-    if not np.all(w > 0.0):
-        raise IdentificationError(f"weights must be {K} positive numbers, got {describe(weights)}")
-    dof = 3.0 * float(_counts(S_list).sum()) - 6.0 - (0.0 if points_known else 3.0 * K)
+    w = _positive_numbers("weights", weights, K)
+    factors = _independent_shares(S_list, independent)
+    dof = 3.0 * float((factors * _counts(S_list)).sum()) - 6.0 - (0.0 if points_known else 3.0 * K)
     if not (K > 0 and dof > 0.0):
         return None
-    weighted = [wk * S for wk, S in zip(w, S_list, strict=True)]
+    weighted = [wk * fk * S for wk, fk, S in zip(w, factors, S_list, strict=True)]
     H, _ = _joint_normal_equations(weighted, R, p_WC, p_HP)
     H = H[:6, :6] if points_known else H
     try:

@@ -148,6 +148,10 @@ def hand_eye_parts(config: HandEyeConfig) -> HandEyeParts:
         observe_min_samples=100,
         reacquire_radius=0.004,  # m, three times the depth noise
         min_rotation_spread=0.05, keep_allowable_error=True,
+        # rad between a point's distinct views: half the view distance beyond which a track's
+        # errors no longer correlate (0.16 rad, bench/bench_view_correlation.py), so the views'
+        # errors are nearly independent of each other
+        view_angle=0.08,
         free_space_radius=0.005,  # m around the adopted tool point: the smallest depth seen behind it
         keep_tool_points=True, turn_admit_known=True,
         # after a slip with the scene still, only p_HP is new (3 unknowns): 1.7 s at 30 Hz

@@ -35,6 +35,7 @@ from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.identification.eye_to_hand import EyeToHandIdentifier, pack_x
 from sustain_drake.identification.rotation import rotation_angle
 from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria
+from sustain_drake.identification.view_correlation import _view_row
 
 
 def gather(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCriteria,
@@ -174,7 +175,8 @@ def admit(feature_id, criteria, time, p_CP, X_WH, symmetric: bool = False) -> Ca
     identifier.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
     return Candidate(feature_id, identifier.state, identifier.solve(refine_estimate=False), float(time),
                      float(time), np.array(p_CP), np.array(X_WH), sampled_p_CP=np.array(p_CP),
-                     symmetric=symmetric)
+                     symmetric=symmetric, view_list=view_of(p_CP, X_WH)[None, :],
+                     view_sums=_view_row(p_CP, X_WH[:3, :3], X_WH[:3, 3])[None, :])
 
 
 def identifier_of(c: Candidate, criteria, forgetting_factor) -> EyeToHandIdentifier:
@@ -201,8 +203,49 @@ def feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, re
         return replace(c, last_sample=float(time))  # seen where it was: held, not lost
     identifier = identifier_of(c, criteria, forgetting_factor)
     identifier.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
+    c = _with_view(c, p_CP, X_WH, params)
     return replace(c, statistic=identifier.state, last_sample=float(time), sampled_p_CP=np.array(p_CP),
                    solution=identifier.solve(refine_estimate=refine))
+
+
+def _with_view(c: Candidate, p_CP, X_WH, params: CandidateParams) -> Candidate:
+    """``view_angle``: the candidate with this sample in its views (``Candidate.view_list``,
+    ``view_sums``): a new view when it lies at least that far from each of them, else added to the
+    nearest (0: not kept, every sample counts as its own view)."""
+    if params.view_angle <= 0:
+        return c
+    views, sums = with_view(c.view_list, c.view_sums, p_CP, X_WH, params.view_angle)
+    return replace(c, view_list=views, view_sums=sums)
+
+
+def with_view(views: np.ndarray, sums: np.ndarray, p_CP, X_WH, view_angle: float):
+    """A point's views (V x 12, ``view_of``) and their sums (V x 16, ``view_correlation.view_row``)
+    with one more sample: a new view when it lies at least ``view_angle`` (rad) from each, else
+    added to the nearest. New arrays; the inputs are left as they were."""
+    view, row = view_of(p_CP, X_WH), _view_row(p_CP, X_WH[:3, :3], X_WH[:3, 3])
+    distances = view_distance(views, view) if len(views) else np.zeros(0)
+    if not len(distances) or distances.min() >= view_angle:
+        return np.vstack([views, view]), np.vstack([sums, row])
+    sums = sums.copy()
+    sums[int(np.argmin(distances))] += row
+    return views, sums
+
+
+def view_of(p_CP, X_WH) -> np.ndarray:
+    """A sample's view (12): the hand's orientation ``R_WH`` (column-major) and the point's
+    direction from the camera (the unit ray in C). With the camera fixed these say how the camera
+    sees the point's patch: its face's angle, its turn in the image, its place in the image."""
+    p, R_WH = np.asarray(p_CP, dtype=float), np.asarray(X_WH, dtype=float)[:3, :3]
+    return np.concatenate([R_WH.reshape(9, order="F"), p / np.linalg.norm(p)])
+
+
+def view_distance(views: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """rad from each of ``views`` (V x 12) to ``view`` (``view_of``; or V x 12, pairwise): the hand's
+    turn between them plus the angle between the rays, an upper bound of how far the camera's line
+    of sight moved over the patch."""
+    cosines = (np.sum(views[..., :9] * view[..., :9], axis=-1) - 1.0) / 2.0  # tr(R_a^T R_b) = 1 + 2 cos
+    rays = np.sum(views[..., 9:] * view[..., 9:], axis=-1)
+    return np.arccos(np.clip(cosines, -1.0, 1.0)) + np.arccos(np.clip(rays, -1.0, 1.0))
 
 
 def _new_view(c: Candidate, p_CP, params: CandidateParams) -> bool:

@@ -30,6 +30,11 @@ class Candidate:
     verified_samples: int = 0  # its samples taken up to the last frame the adopted model was verified
     sampled_p_CP: np.ndarray | None = None  # the point of its last sample (``min_view_change``)
     frames: int = 1  # frames it was fed (a new view or a held one): the observation's counts
+    # its samples' distinct views (``view_angle``; V x 12, ``admission.view_of``) and each view's
+    # sums (V x 16, ``view_correlation.view_row``): a point's error repeats within a view, so the
+    # cameras' 95 % regions count its samples as ``view_correlation.independent_samples``
+    view_list: np.ndarray = field(default_factory=lambda: np.zeros((0, 12)))
+    view_sums: np.ndarray = field(default_factory=lambda: np.zeros((0, 16)))
     # its point was centrally symmetric when admitted; False: anchored on its patch (a
     # second choice, ``fitting.FIRST_CHOICE_POINTS``) or not known
     symmetric: bool = False

@@ -21,6 +21,7 @@ from sustain_drake.identification.candidates.fitting import (
     best_p_HP_given_camera,
     camera_sd,
     explained,
+    independent_of,
     mean_squared_error_of,
     points_in_camera,
     rotation_spread,
@@ -268,7 +269,8 @@ def _camera_from_turn_and_new_points(kept, bank: CandidateBank, params: Candidat
               and rotation_spread(c.statistic) >= params.min_rotation_spread]
     total, limit = len(points), params.observe_consistency**2 * bank.adopted_mse
     while len(points) >= FIRST_CHOICE_POINTS and 2 * len(points) > total:
-        found = position_and_points_given_rotation([S_of(c.statistic) for c in points], bank.turned_R_WC)
+        S_list = [S_of(c.statistic) for c in points]
+        found = position_and_points_given_rotation(S_list, bank.turned_R_WC)
         if found is None:
             return None
         worst = int(np.argmax(found.mean_squared_errors))
@@ -276,6 +278,11 @@ def _camera_from_turn_and_new_points(kept, bank: CandidateBank, params: Candidat
             break
         points = points[:worst] + points[worst + 1:]
     else:
+        return None
+    # The same fit, its covariance counting each point's independent samples at it.
+    found = position_and_points_given_rotation(
+        S_list, bank.turned_R_WC, independent_of(points, bank.turned_R_WC, found.p_WC, params))
+    if found is None:
         return None
     p_turned, window = _turn_window(bank, params)
     if not (REGION_95 * math.sqrt(float(np.trace(found.covariance))) <= params.camera_accuracy
@@ -315,7 +322,8 @@ def _camera_near_turn_from_new_points(kept, archive, bank: CandidateBank, params
     else:
         return None
     R_WC, p_WC, P = fit
-    covariance = joint_covariance(S_list, R_WC, p_WC, P)
+    independent = independent_of(points, R_WC, p_WC, params)
+    covariance = joint_covariance(S_list, R_WC, p_WC, P, independent=independent)
     ids = {c.feature_id for c in kept}
     tracked = [k for k in range(len(points)) if points[k].feature_id in ids]
     if not (tracked and np.linalg.norm(p_WC - p_turned) <= window
@@ -331,7 +339,8 @@ def _within_accuracy_given_points(pairs: list, found, params: CandidateParams) -
     ``camera_rotation_accuracy`` (``joint_covariance`` with ``points_known``)."""
     return sd_within_targets(camera_sd(joint_covariance(
         [S_of(c.statistic) for c, _ in pairs], found[0], found[1], np.array([p for _, p in pairs]),
-        points_known=True)), params)
+        points_known=True, independent=independent_of([c for c, _ in pairs], found[0], found[1], params))),
+        params)
 
 
 def _turn_window(bank: CandidateBank, params: CandidateParams) -> tuple[np.ndarray, float]:

@@ -18,6 +18,7 @@ from sustain_drake.identification.eye_to_hand import (
 from sustain_drake.identification.eye_to_hand_points import joint_covariance, refine_joint, rotation_levers
 from sustain_drake.identification.observability import region_95
 from sustain_drake.identification.sustainable_identifier import SustainableIdentifier
+from sustain_drake.identification.view_correlation import independent_samples
 
 
 def x_is_set(x: np.ndarray | None) -> bool:
@@ -145,12 +146,25 @@ def stitch(statistics: list, R_WC: np.ndarray, p_WC: np.ndarray, radius: float,
     return [(group[0], group[1]) for group in groups]
 
 
+def independent_of(candidates, R_WC: np.ndarray, p_WC: np.ndarray, params: CandidateParams) -> list:
+    """Per candidate, how many independent samples its samples count as at the camera ``(R_WC,
+    p_WC)``: ``view_correlation.independent_samples`` of its views (``view_angle``), each with its
+    own best ``p_HP`` under that camera; its samples when views are not kept (``view_angle`` 0)."""
+    if params.view_angle <= 0:
+        return [float(c.solution.num_samples) for c in candidates]
+    out = []
+    for c in candidates:
+        p_HP = best_p_HP_given_camera(c.statistic, R_WC, p_WC)
+        out.append(independent_samples(c.view_sums, S_of(c.statistic), R_WC, p_WC, p_HP))
+    return out
+
+
 # m^2 (1 um RMS): a mean squared error below this is round-off (noise-free data); the joint
 # refinement's ratios (the members' limit, the weights) are taken against at least this.
 ROUND_OFF_MSE = 1e-12
 
 
-def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tuple[Candidate, list]:
+def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tuple[Candidate, list, list]:
     """``params.joint``: the leader's camera refined jointly with every other candidate (tracked
     or archived, ``joint_min_samples`` samples) that it explains (``eye_to_hand_points.refine_joint``:
     one camera, one ``p_HP`` per point). Members are the points whose own mean squared error
@@ -158,11 +172,13 @@ def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tu
     the leader's camera, then again under the joint one (three times with ``stitch_radius``: the
     groups of tracks of one point are formed again under each better camera). Returns the leader
     with the joint camera and its own ``p_HP`` (its group's, when stitched; its verdict and
-    ``expected_mse`` unchanged: the paper's rule judges the leader), and the statistics of the
-    points used (one per group when stitched; the leader's first)."""
+    ``expected_mse`` unchanged: the paper's rule judges the leader), the statistics of the
+    points used (one per group when stitched; the leader's first) and their independent samples
+    (``independent_of``, summed over a group)."""
     estimate = best.solution.estimate
     if estimate is None:
-        return best, [best.statistic]
+        return best, [best.statistic], None
+    alone = best, [best.statistic], independent_of([best], estimate.R_WC, estimate.p_WC, params)
     others = [c for c in list(kept) + list(archive)
               if c.feature_id != best.feature_id and c.solution.num_samples >= params.joint_min_samples]
     R, p_WC = estimate.R_WC, estimate.p_WC
@@ -171,19 +187,23 @@ def joint_refined(best: Candidate, kept, archive, params: CandidateParams) -> tu
     for _ in range(3 if params.stitch_radius > 0 else 2):
         members = first_choice([c for c in others if own_fit(c.statistic, R, p_WC)[1] <= limit], best)
         if not members:
-            return best, [best.statistic]
+            return alone
         statistics = [c.statistic for c in [best] + members]
+        groups = [[i] for i in range(len(statistics))]
         if params.stitch_radius > 0:
-            statistics = [s for _, s in stitch(statistics, R, p_WC, params.stitch_radius)]
+            stitched = stitch(statistics, R, p_WC, params.stitch_radius)
+            groups, statistics = [g for g, _ in stitched], [s for _, s in stitched]
         P, weights = _points_and_weights(statistics, R, p_WC, params)
         refined = refine_joint([w * S_of(s) for w, s in zip(weights, statistics, strict=True)], R, p_WC, P)
         if refined is None:
-            return best, [best.statistic]
+            return alone
         R, p_WC, P = refined
+    independent = independent_of([best] + members, R, p_WC, params)
+    independent = [sum(independent[i] for i in g) for g in groups]
     x = pack_x(R, p_WC, P[0])  # the leader's point (its group is the first)
     joint = EyeToHandEstimate(R, p_WC.copy(), P[0].copy(), x, mean_squared_error_of(best.statistic, x))
     solution = replace(best.solution, projected=joint, refined=joint)
-    return replace(best, solution=solution), statistics
+    return replace(best, solution=solution), statistics, independent
 
 
 # count: centrally symmetric points (a leader and the witness that confirms its camera,
@@ -230,18 +250,21 @@ def smallest_rotation_lever(statistics: list, estimate: EyeToHandEstimate | None
     return float(rotation_levers([S_of(s) for s in statistics], estimate.R_WC, estimate.p_WC, P)[0])
 
 
-def joint_camera_sd(statistics: list, estimate: EyeToHandEstimate | None, params: CandidateParams):
+def joint_camera_sd(statistics: list, estimate: EyeToHandEstimate | None, params: CandidateParams,
+                    independent=None):
     """The 1 sd of the camera that ``joint_refined`` fitted to ``statistics`` (its returned points,
-    the leader's first) at ``estimate``: ``(position m, rotation rad)``, each the RMS of the 3-D
-    error, from the joint fit's Gauss-Newton covariance (``eye_to_hand_points.joint_covariance``,
-    each point with its own ``p_HP`` under that camera and the fit's weights). None without an
-    estimate or when the fit is undetermined. A measure of the views themselves, not a count of
-    samples (docs/hand_eye_record.md, "The joint fit's own uncertainty")."""
+    the leader's first, and their ``independent`` samples; None: all) at ``estimate``: ``(position
+    m, rotation rad)``, each the RMS of the 3-D error, from the joint fit's Gauss-Newton covariance
+    (``eye_to_hand_points.joint_covariance``, each point with its own ``p_HP`` under that camera,
+    the fit's weights and its independent samples). None without an estimate or when the fit is
+    undetermined. A measure of the views themselves, not a count of samples
+    (docs/hand_eye_record.md, "The joint fit's own uncertainty")."""
     if estimate is None:
         return None
     P, weights = _points_and_weights(statistics, estimate.R_WC, estimate.p_WC, params)
     S_list = [S_of(s) for s in statistics]
-    return camera_sd(joint_covariance(S_list, estimate.R_WC, estimate.p_WC, P, weights))
+    return camera_sd(joint_covariance(S_list, estimate.R_WC, estimate.p_WC, P, weights,
+                                      independent=independent))
 
 
 def camera_sd(covariance: np.ndarray | None):

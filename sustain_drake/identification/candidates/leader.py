@@ -18,6 +18,7 @@ from sustain_drake.identification.candidates.bank import Adoption, Candidate, Ca
 from sustain_drake.identification.candidates.fitting import (
     FIRST_CHOICE_POINTS,
     best_p_HP_given_camera,
+    independent_of,
     joint_camera_sd,
     joint_refined,
     mean_squared_error_of,
@@ -121,9 +122,11 @@ def _adopt(best: Candidate, params: CandidateParams, seen: SeenFrame, pool: Pool
            unseen: bool) -> tuple[Pool, bool]:  # fmt: skip
     """The converged, confirmed candidate ``best`` as the leader (its camera refined jointly with
     ``joint``), unless its points' views do not pin the camera's rotation: ``(pool, held back)``."""
+    estimate = best.solution.estimate
     kind, statistics = "identified", [best.statistic]
+    independent = None if estimate is None else independent_of([best], estimate.R_WC, estimate.p_WC, params)
     if params.joint:
-        best, statistics = joint_refined(best, pool.kept, pool.archive, params)
+        best, statistics, independent = joint_refined(best, pool.kept, pool.archive, params)
         if len(statistics) > 1:
             kind = f"identified, camera refined with {len(statistics)} points"
     lever = smallest_rotation_lever(statistics, best.solution.estimate)
@@ -135,7 +138,7 @@ def _adopt(best: Candidate, params: CandidateParams, seen: SeenFrame, pool: Pool
     # camera_accuracy: the camera's own 95 % region must lie within the accuracy asked for (not
     # computed for a leader already held back). A point no longer seen gives no more views: it is
     # not adopted, and no longer held.
-    sd = None if held_back else joint_camera_sd(statistics, best.solution.estimate, params)
+    sd = None if held_back else joint_camera_sd(statistics, best.solution.estimate, params, independent)
     wide = not held_back and not within_accuracy(sd, params)
     if held_back or wide:
         return pool, not unseen
@@ -173,7 +176,7 @@ def refine_adopted(bank: CandidateBank, params: CandidateParams, reference_x, ti
     start = EyeToHandEstimate(R_WC, p_WC, p_HP, x, mse)
     seed = replace(leader, solution=replace(leader.solution, projected=start, refined=start,
                                             expected_mse=max(mse, bank.adopted_mse)))
-    refined, statistics = joint_refined(seed, bank.candidates, bank.archive, params)
+    refined, statistics, _ = joint_refined(seed, bank.candidates, bank.archive, params)
     num_points = len(statistics)
     if num_points < 2:
         return bank

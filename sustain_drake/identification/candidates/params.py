@@ -99,6 +99,9 @@ class CandidateParams:
     # after a turn, also admit tracks near where the turned camera sees a known point, body or not:
     # after a camera move the detector's body cells hold the static scene
     turn_admit_known: bool = False
+    # rad (the hand's turn plus the ray's) between a point's distinct views: the cameras' 95 % regions
+    # count its samples by how much of its error repeats within a view; 0: every sample independent
+    view_angle: float = 0.0
     # m a point must move in the camera frame before its next sample; 0: every frame, the paper's.
     # Measurement errors repeat with the view, so held views would otherwise outweigh the others
     min_view_change: float = 0.0
@@ -133,7 +136,7 @@ class CandidateParams:
         if not (self.stitch_radius >= 0 and math.isfinite(self.stitch_radius)):
             raise ValueError(f"stitch_radius must be >= 0, got {self.stitch_radius}")
         for name in ("refine_interval", "free_space_radius", "min_view_change", "min_rotation_lever",
-                     "min_adopt_rotation_spread"):
+                     "min_adopt_rotation_spread", "view_angle"):
             value = getattr(self, name)
             if not (value >= 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be >= 0, got {value}")

@@ -59,9 +59,9 @@ def views_confirm(best: Candidate, pool: Pool, params: CandidateParams) -> bool:
     if math.isinf(params.camera_accuracy) and math.isinf(params.camera_rotation_accuracy):
         return True
     previous = best.solution.estimate
-    refined, statistics = joint_refined(best, pool.kept, pool.archive, params)
+    refined, statistics, independent = joint_refined(best, pool.kept, pool.archive, params)
     estimate = refined.solution.estimate
-    if not within_accuracy(joint_camera_sd(statistics, estimate, params), params):
+    if not within_accuracy(joint_camera_sd(statistics, estimate, params, independent), params):
         return False
     turn = rotation_angle(nearest_rotation(previous.R_WC.T @ estimate.R_WC))
     return bool(np.linalg.norm(estimate.p_WC - previous.p_WC) <= params.camera_accuracy

@@ -26,6 +26,7 @@ from sustain_drake.identification.candidates.fitting import (
     ROUND_OFF_MSE,
     S_of,
     camera_sd,
+    independent_of,
     mean_squared_error_of,
     own_fit,
     rotation_spread,
@@ -82,7 +83,8 @@ def recover(params: CandidateParams, criteria: ConvergenceCriteria, seen: SeenFr
     tracked = [k for k, c in enumerate(inliers) if c.feature_id in ids]
     if not tracked or sum(c.solution.num_samples for c in inliers) < criteria.min_samples:
         return pool
-    sd = camera_sd(joint_covariance([S_of(c.statistic) for c in inliers], R_WC, p_WC, P))
+    sd = camera_sd(joint_covariance([S_of(c.statistic) for c in inliers], R_WC, p_WC, P,
+                                    independent=independent_of(inliers, R_WC, p_WC, params)))
     if not sd_within_targets(sd, params):
         return pool
     k = max(tracked, key=lambda i: inliers[i].solution.num_samples)
