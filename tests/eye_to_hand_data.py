@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from sustain_drake.identification import EyeToHandIdentifier
+
 
 @dataclass
 class EyeToHandTruth:
@@ -62,3 +64,15 @@ def make_points(truth: EyeToHandTruth, p_HP: np.ndarray, n: int, noise_m=0.0, mi
         p_W = np.einsum("nij,j->ni", X_WH[samples, :3, :3], p) + X_WH[samples, :3, 3]
         points[f"p{k}"] = (samples, (p_W - p_WC) @ R_WC + rng.normal(0.0, sigma, (len(samples), 3)))
     return points, X_WH
+
+
+def point_identifiers(points: dict, X_WH: np.ndarray) -> list:
+    """One ``EyeToHandIdentifier`` per point of ``make_points``'s ``points``, each fed that point's
+    samples (in the labels' order)."""
+    identifiers = []
+    for samples, p_C in points.values():
+        identifier = EyeToHandIdentifier()
+        for c, X in zip(p_C, X_WH[samples], strict=True):
+            identifier.add(c, X[:3, :3], X[:3, 3])
+        identifiers.append(identifier)
+    return identifiers

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from eye_to_hand_data import make_points, make_samples, make_truth, rotation_error_deg
+from eye_to_hand_data import make_points, make_samples, make_truth, point_identifiers, rotation_error_deg
 from scipy.spatial.transform import Rotation
 
 from sustain_drake.identification import (
@@ -237,12 +237,7 @@ def test_the_joint_covariance_of_one_point_is_the_single_point_covariance():
 def test_points_given_the_true_camera_are_the_true_points():
     truth = make_truth(6)
     data, X_WH = make_points(truth, P_HP, 12, seed=3)
-    statistics = []
-    for samples, p_C in data.values():
-        identifier = EyeToHandIdentifier()
-        for c, X in zip(p_C, X_WH[samples], strict=True):
-            identifier.add(c, X[:3, :3], X[:3, 3])
-        statistics.append(identifier.core.S.copy())
+    statistics = [identifier.core.S.copy() for identifier in point_identifiers(data, X_WH)]
     found = points.points_given_camera(statistics, truth.X_WC[:3, :3], truth.X_WC[:3, 3])
     np.testing.assert_allclose(found, P_HP, atol=1e-9)
     R, p_WC, P, weights = points.refine_joint_weighted(statistics, truth.X_WC[:3, :3], truth.X_WC[:3, 3])
@@ -254,12 +249,7 @@ def _three_point_fit(n: int = 60, seed: int = 4):
     truth = make_truth(6)
     p_HP = np.array([[0.05, 0.02, 0.12], [-0.08, 0.04, 0.10], [0.0, -0.09, 0.15]])
     data, X_WH = make_points(truth, p_HP, n, noise_m=1e-3, seed=seed)
-    S_list = []
-    for samples, p_C in data.values():
-        identifier = EyeToHandIdentifier()
-        for c, X in zip(p_C, X_WH[samples], strict=True):
-            identifier.add(c, X[:3, :3], X[:3, 3])
-        S_list.append(identifier.core.S)
+    S_list = [identifier.core.S for identifier in point_identifiers(data, X_WH)]
     R, p_WC, P = points.refine_joint(S_list, truth.X_WC[:3, :3], truth.X_WC[:3, 3], p_HP)
     return truth, S_list, R, p_WC, P
 

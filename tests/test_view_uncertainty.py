@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from eye_to_hand_data import make_points, make_truth
+from eye_to_hand_data import make_points, make_truth, point_identifiers
 
 from sustain_drake.identification import EyeToHandIdentifier
 from sustain_drake.identification import eye_to_hand_points as points
@@ -28,12 +28,7 @@ PARAMS = CandidateParams(joint=True, joint_weighted=True)
 def statistics_and_fit(n: int, seed: int):
     truth = make_truth(6)
     data, X_WH = make_points(truth, P_HP, n, noise_m=1e-3, seed=seed)
-    states = []
-    for samples, p_C in data.values():
-        identifier = EyeToHandIdentifier()
-        for c, X in zip(p_C, X_WH[samples], strict=True):
-            identifier.add(c, X[:3, :3], X[:3, 3])
-        states.append(identifier.state.copy())
+    states = [identifier.state.copy() for identifier in point_identifiers(data, X_WH)]
     S_list = [S_of(s) for s in states]
     R, p_WC, P, _ = points.refine_joint_weighted(S_list, truth.X_WC[:3, :3], truth.X_WC[:3, 3])
     estimate = EyeToHandEstimate(R, p_WC, P[0], pack_x(R, p_WC, P[0]), 0.0)
