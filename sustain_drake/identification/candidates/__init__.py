@@ -27,7 +27,7 @@ system in an abstract state): ``step(bank, params, criteria, frame)`` once per t
   ``reacquire_radius``) takes its place, so a re-seeded track of the same point keeps the
   observation going; beyond the paper, the depth image checks the adopted tool point every frame
   (``free_space_radius``): a surface seen behind where the model puts it is a violation, tracked
-  points or not;
+  points or not (and never evidence for the model);
 - reset (``step``): a new reset value (a change was detected: the tool slipped or the camera moved)
   drops every candidate; identification starts again from the body features seen then, unless the
   abandoned model's camera explains a new point (``slip_recovery``, ``keep_camera``: a slip) or,

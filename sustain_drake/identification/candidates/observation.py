@@ -5,7 +5,7 @@ to where the adopted estimate puts the tracked point (within ``reacquire_radius`
 re-seeded track of the same point keeps the observation going. Beyond the paper: extra observers, blind
 evidence on frames with no observed point, and the depth check of the adopted tool point
 (``free_space_radius``): a surface seen behind where the model puts it is a violation, tracked points or
-not."""
+not (and only a violation: the depth cannot confirm the model)."""
 
 import math
 from dataclasses import replace
@@ -51,7 +51,7 @@ def observe(bank: CandidateBank, params: CandidateParams, seen: SeenFrame) -> Ca
     before = bank.sample_count
     bank = _observe_points(bank, params, seen)
     if params.free_space_radius > 0 and depth_gap is not None:
-        bank = _free_space_sample(bank, reference_x, seen.X_WH, depth_gap, before)
+        bank = _free_space_sample(bank, reference_x, seen.X_WH, depth_gap, before, allowable_error)
     if bank.leader < 0 or bank.sample_count > before:
         if bank.leader >= 0 and bank.tool_observed and bank.sample_error <= allowable_error:
             bank = mark_verified(bank)  # a tool point the model holds was seen where the model puts it
@@ -62,9 +62,14 @@ def observe(bank: CandidateBank, params: CandidateParams, seen: SeenFrame) -> Ca
     return bank
 
 
-def _free_space_sample(bank, reference_x, X_WH, depth_gap, before: int) -> CandidateBank:
-    """``free_space_radius``: the depth behind the adopted tool point gives ``s_t =
-    max(gap, 0)^2``, the larger with the points' sample of this frame, or this frame's only one."""
+def _free_space_sample(bank, reference_x, X_WH, depth_gap, before: int,
+                       allowable_error: float) -> CandidateBank:
+    """``free_space_radius``: the depth behind the adopted tool point gives ``s_t = max(gap, 0)^2``,
+    the larger with the points' sample of this frame. On a frame with no point's sample it is a
+    sample only when it violates ``allowable_error``: the depth can show that the tool is not where
+    the model puts it (a surface clearly behind), never that it is (a surface at or in front of the
+    point is the tool, or the arm, or a person passing, and a model off along the surface finds one
+    there too), so a silent depth check must not keep a changed model alive while no point is seen."""
     x = _model_in_use(bank, reference_x)
     if x is None:
         return bank
@@ -74,6 +79,8 @@ def _free_space_sample(bank, reference_x, X_WH, depth_gap, before: int) -> Candi
     s_t = max(gap, 0.0) ** 2
     if bank.sample_count > before:
         return replace(bank, sample_error=max(bank.sample_error, s_t))
+    if not s_t > allowable_error:
+        return bank
     return replace(bank, sample_count=before + 1, sample_error=s_t, sample_errors=())
 
 
