@@ -705,12 +705,13 @@ def test_stitching_tracks_of_one_point_pins_the_camera_and_keeps_other_marks_apa
         CandidateParams(stitch_radius=-1.0)
 
 
-def _slip_with_every_track_lost(params, slip, depth=False):
+def _slip_with_every_track_lost(params, slip, depth=False, gap=0.0):
     """9 (the tool point, leader) and 4, 5 (more tool points) are observed under the true model;
     at frame 300 the tool slips by ``slip`` (in H) and every track ends at once (the tracker lost
     them in the jump); from then on new tracks (ids + 100) of the same three marks. ``depth``: a
-    depth camera sees the tool as a 3 cm ball around the tool point, a wall 2 m away elsewhere.
-    Returns ``{frame: (sample_count, sample_error)}`` and the final bank."""
+    depth camera sees the tool as a 3 cm ball around the tool point (its depth check there gives
+    ``gap``, m), a wall 2 m away elsewhere. Returns ``{frame: (sample_count, sample_error)}`` and
+    the final bank."""
     points = {9: P_TOOL, 4: P_TOOL + [0.03, -0.02, 0.04], 5: P_TOOL + [-0.04, 0.03, -0.05]}
     x_true = pack_x(TRUTH.X_WC[:3, :3], TRUTH.X_WC[:3, 3], P_TOOL)
     bank, rng, counts = CandidateBank(), np.random.default_rng(3), {}
@@ -722,7 +723,7 @@ def _slip_with_every_track_lost(params, slip, depth=False):
         tool_C = seen(X, P_TOOL + (slip if after else 0.0), rng, noise=0.0)
 
         def depth_gap(p_CP, tool_C=tool_C):
-            return 0.0 if np.linalg.norm(p_CP - tool_C) < 0.03 else 2.0 - p_CP[2]
+            return gap if np.linalg.norm(p_CP - tool_C) < 0.03 else 2.0 - p_CP[2]
 
         frame = FrameInput(k * DT, 0.0, X, k * DT, np.array(ids), np.array(p), np.ones(3, bool),
                            np.ones(3, bool), x_true, allowable_error=1e-4,
@@ -787,6 +788,21 @@ def test_the_depth_behind_the_adopted_tool_point_tells_a_slip_no_track_shows(sli
     assert any(counts[k][0] == counts[k - 1][0] for k in range(301, 480))
     resumed = [k for k in range(301, 480) if counts[k][0] > counts[k - 1][0]]
     assert resumed and max(counts[k][1] for k in resumed) < 2e-5
+
+
+@pytest.mark.parametrize("gap", [0.005, 0.02])
+def test_a_blind_frames_depth_check_is_a_sample_only_when_it_violates_the_allowable_error(gap):
+    """``free_space_radius`` on the blind frame where every track ends (frame 300, no slip): a
+    surface 5 mm behind the tool point (2.5e-5 m^2, under the allowable 1e-4) gives no sample, one
+    20 mm behind (4e-4 m^2) is a violation; on the frames with a point's sample it joins the
+    sample either way."""
+    params = replace(HANDOVER, max_observers=2, free_space_radius=0.005)
+    counts, _ = _slip_with_every_track_lost(params, np.zeros(3), depth=True, gap=gap)
+    if gap**2 <= 1e-4:
+        assert counts[300][0] == counts[299][0]
+    else:
+        assert counts[300] == (counts[299][0] + 1, pytest.approx(gap**2))
+    assert all(counts[k][1] >= gap**2 * (1 - 1e-9) for k in range(200, 300))  # joined every sample
 
 
 _SLIDES = {9: [0.0, 0.0, 0.03], 4: [0.02, 0.0, 0.0], 5: [0.0, -0.025, 0.0], 6: [0.0, 0.02, -0.02],
