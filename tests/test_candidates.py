@@ -1289,3 +1289,44 @@ def test_the_view_distance_adds_the_hands_turn_and_the_rays_angle():
     assert candidates.admission.view_distance(view[None, :], other)[0] == pytest.approx(0.05, abs=1e-9)
     pairwise = candidates.admission.view_distance(np.array([view, other]), np.array([other, other]))
     np.testing.assert_allclose(pairwise, [0.05, 0.0], atol=1e-6)
+
+
+def _on_the_wrist(k):
+    """``(X_WL, X_WH)``: the wrist link L moves as ``hand_pose`` does; the hand H is turned on it by
+    the last joint about L's z axis (0.3 rad to either side) and sits 50 mm along that axis."""
+    X_WL = hand_pose(k)
+    X_LH = np.eye(4)
+    X_LH[:3, :3] = Rotation.from_rotvec([0.0, 0.0, 0.3 * math.sin(0.8 * k * DT + 0.5)]).as_matrix()
+    X_LH[2, 3] = 0.05
+    return X_WL, X_WL @ X_LH
+
+
+@pytest.mark.parametrize("parent_known", [True, False])
+def test_a_point_on_the_hands_parent_link_near_the_last_joints_axis_is_rejected(parent_known):
+    """``FrameInput.X_WL``: a point fixed on the wrist link 15 mm from the axis of the joint that
+    turns the hand moves almost like the hand. Without the link's pose it converges on the hand's
+    model first and leads, under a camera millimetres off; with it, it fits the link better
+    (``fitting.on_parent_link``) and is rejected, and the hand's point leads with the true camera."""
+    p_LQ = np.array([0.015, 0.0, 0.03])  # on the wrist link, 15 mm from the last joint's axis
+    rng = np.random.default_rng(11)
+    bank = CandidateBank()
+    for k in range(400):
+        X_WL, X_WH = _on_the_wrist(k)
+        # the wrist's point is admitted first (the oldest track), the hand's point 2 s later
+        ids, points = [7], [seen(X_WL, p_LQ, rng, noise=0.2e-3)]
+        if k >= 60:
+            ids, points = ids + [9], points + [seen(X_WH, P_TOOL, rng, noise=0.2e-3)]
+        frame = FrameInput(k * DT, 0.0, X_WH, k * DT, np.array(ids), np.array(points),
+                           np.ones(len(ids), bool), np.ones(len(ids), bool),
+                           X_WL=X_WL if parent_known else None)
+        bank = candidates.step(bank, PARAMS, CRITERIA, frame)
+    first = bank.adoptions[0]
+    if parent_known:
+        assert first.feature_id == 9 and 7 in bank.rejected
+    else:  # what the rule prevents
+        assert first.feature_id == 7
+    estimate = bank.find(first.feature_id).solution.estimate  # the leader's, refined to the end
+    error = np.linalg.norm(estimate.p_WC - TRUTH.X_WC[:3, 3])
+    assert (error < 5e-3) == parent_known  # the wrist's point: a camera 7.9 mm off
+    if parent_known:
+        assert rotation_error_deg(estimate.R_WC, TRUTH.X_WC[:3, :3]) < 0.5

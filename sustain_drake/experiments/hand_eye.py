@@ -111,6 +111,7 @@ def build_loop(builder, station, scenario, parts: HandEyeParts | None = None):
         # motion's far postures while identifying.
         builder.Connect(loop.motion_confirm(), station.GetInputPort("motion_confirm"))
     builder.Connect(station.GetOutputPort("X_WH"), candidates.GetInputPort("X_WH"))
+    builder.Connect(station.GetOutputPort("X_WL"), candidates.GetInputPort("X_WL"))
     builder.Connect(machine.GetOutputPort("pause"), station.GetInputPort("motion_pause"))
     if config.slip_from_wrench:  # the wrist wrench's payload identification watches the held tool
         loop.wrench_watch = add_wrench_watch(builder, station, machine, len(arm_of(scenario).joints))

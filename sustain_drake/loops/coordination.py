@@ -325,9 +325,11 @@ def make_sustainable_coordination(camera_info, num_joints: int, *, loops: Loops 
         shape = a.held_shape if a.loops.touch else None
         payload = add_payload_loop(builder, a.num_joints, a.kinesthetic, shape, a.X_KG)
         inputs["joint_velocities"].append(payload.gate.GetInputPort("joint_velocities"))
-    X_WH, X_WK = _hand_poses(builder, a, inputs)
+    X_WH, X_WK, X_WL = _hand_poses(builder, a, inputs)
     if vision is not None:
         builder.Connect(X_WH, vision.candidates.GetInputPort("X_WH"))
+        if X_WL is not None:  # the hand's parent link: points fixed on it are told from the hand's
+            builder.Connect(X_WL, vision.candidates.GetInputPort("X_WL"))
     if payload is not None:
         _connect_payload(builder, a, payload, X_WK, inputs)
         if vision is not None and a.hand_eye.slip_from_wrench:  # the wrench's change is a slip
@@ -356,16 +358,17 @@ def _required_inputs(a: _Arguments) -> tuple[RequiredInput, ...]:
 
 
 def _hand_poses(builder, a: _Arguments, inputs: dict) -> tuple:
-    """The output ports of the hand and sensor poses: the plant's forward kinematics of the joint
-    positions, or the ``X_WH`` input for both."""
+    """The output ports of the hand and sensor poses and of the hand's parent link: the plant's
+    forward kinematics of the joint positions, or the ``X_WH`` input for both (the parent link then
+    not known: None)."""
     if a.plant is not None:
         fk = builder.AddSystem(HandPoseFromPlant(a.plant, a.hand_frame, a.sensor_frame, a.model_instance))
         fk.set_name("hand_pose_from_plant")
         inputs["joint_positions"].append(fk.get_input_port())
-        return fk.GetOutputPort("X_WH"), fk.GetOutputPort("X_WK")
+        return fk.GetOutputPort("X_WH"), fk.GetOutputPort("X_WK"), fk.GetOutputPort("X_WL")
     passthrough = builder.AddSystem(_PosePassThrough())
     inputs["X_WH"].append(passthrough.get_input_port())
-    return passthrough.get_output_port(), passthrough.get_output_port()
+    return passthrough.get_output_port(), passthrough.get_output_port(), None
 
 
 def _connect_payload(builder, a: _Arguments, payload, X_WK, inputs: dict) -> None:

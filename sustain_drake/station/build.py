@@ -78,7 +78,7 @@ ROOM_LIGHTS = [
 ]
 
 EXPORTED_OUTPUTS = (
-    "joint_positions", "joint_velocities", "head_joint_positions", "X_WH", "wrench",
+    "joint_positions", "joint_velocities", "head_joint_positions", "X_WH", "X_WL", "wrench",
     "color_image", "depth_image", "label_image", "image_time",
     "true_X_WC", "true_p_HP", "true_X_HT", "true_tool_mass", "true_p_KCm", "true_outboard_mass",
     "true_p_KCo", "true_tool_inertia", "true_outboard_inertia", "true_touch", "true_contact",
@@ -505,10 +505,11 @@ def _add_ground_truth(builder, world: _World, camera_body, X_BC) -> GroundTruth:
         X_BC=X_BC, tool_body=tracked.body().index(),
         p_TP=tracked.GetFixedPoseInBodyFrame().translation(),
         tool=None if world.tool_body is None else point_mass(world.tool_body),
-        outboard=[point_mass(plant.get_body(b)) for b in outboard]))
+        outboard=[point_mass(plant.get_body(b)) for b in outboard],
+        parent_body=wrist_roll.parent_body().index()))
     truth.set_name("ground_truth")
     builder.Connect(plant.get_body_poses_output_port(), truth.get_input_port())
-    for port in ("X_WH", "true_X_WC", "true_p_HP", "true_X_HT", "true_tool_mass", "true_p_KCm",
+    for port in ("X_WH", "X_WL", "true_X_WC", "true_p_HP", "true_X_HT", "true_tool_mass", "true_p_KCm",
                  "true_outboard_mass", "true_p_KCo", "true_tool_inertia", "true_outboard_inertia"):
         builder.ExportOutput(truth.GetOutputPort(port), port)
     return truth

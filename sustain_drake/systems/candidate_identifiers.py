@@ -163,6 +163,7 @@ class CandidateIdentifiers(LeafSystem):
         - image_time (optional, with camera_info)
         - scene_turn (optional)
         - scene_still_since (optional)
+        - X_WL (optional)
         output_ports:
         - eigenvalues
         - x
@@ -197,7 +198,10 @@ class CandidateIdentifiers(LeafSystem):
     is the old one turned as the static scene shows, placed by the tool points
     (``identification.candidates.step``). ``scene_still_since`` (1, s: a ``CameraMotionDetector``'s;
     unconnected: inf): a scene judged still since before a reset says the camera did not move, and
-    the kept camera then leads with ``params.keep_camera_min_samples`` samples.
+    the kept camera then leads with ``params.keep_camera_min_samples`` samples. ``X_WL``
+    (``RigidTransform``: the pose now of the hand's parent link, the body the hand's last moving
+    joint turns it on; unconnected: not known): a candidate whose samples fit that link better than
+    the hand is fixed on it, not on the hand, and is rejected (``fitting.on_parent_link``).
 
     Outputs, the same as a ``SustainableIdentifierSystem`` with ``EyeToHandFormulation`` so that a
     ``CoordinationStateMachine`` plugs in: the solution-derived ports are those of the *shown*
@@ -242,6 +246,7 @@ class CandidateIdentifiers(LeafSystem):
         self._sigma = self.DeclareVectorInputPort("allowable_error", 1)
         self._turn = self.DeclareAbstractInputPort("scene_turn", AbstractValue.Make(SceneTurn()))
         self._still = self.DeclareVectorInputPort("scene_still_since", 1)
+        self._X_WL = self.DeclareAbstractInputPort("X_WL", AbstractValue.Make(RigidTransform()))
         self._intrinsics = self._depth = self._time = None
         if camera_info is not None:
             self._intrinsics = intrinsics_from_camera_info(camera_info)
@@ -339,6 +344,7 @@ class CandidateIdentifiers(LeafSystem):
             scene_turn=self._turn.Eval(context) if self._turn.HasValue(context) else None,
             scene_still_since=still, reset_reason=reason,
             symmetric=features.symmetric,  # a length that does not match counts as not known
+            X_WL=self._X_WL.Eval(context).GetAsMatrix4() if self._X_WL.HasValue(context) else None,
         )
         new = candidates.step(self.bank(context), self._params, self._formulation.criteria, frame)
         state.get_mutable_abstract_state(self._bank).set_value(Shared(new))

@@ -33,6 +33,7 @@ class GroundTruth(LeafSystem):
         - body_poses
         output_ports:
         - X_WH
+        - X_WL
         - true_X_WC
         - true_p_HP
         - true_X_HT
@@ -47,6 +48,8 @@ class GroundTruth(LeafSystem):
 
     - ``X_WH`` (``RigidTransform``): the hand H (gripper flange body) in the world; on a real
       robot this comes from forward kinematics of the joint encoders.
+    - ``X_WL`` (``RigidTransform``): the hand's parent link L (``parent_body``: the body the arm's
+      last joint turns the hand on; the hand itself when not given), from the same kinematics.
     - ``true_X_WC`` (``RigidTransform``): the camera's colour frame C in the world (Drake's
       camera convention: +z out of the lens, +x right, +y down).
     - ``true_p_HP`` (3, m): the tracked tool point P in H (the grasp point if no tool).
@@ -67,9 +70,10 @@ class GroundTruth(LeafSystem):
 
     def __init__(self, hand_body: int, X_HK: RigidTransform, camera_body: int,
                  X_BC: RigidTransform, tool_body: int | None, p_TP, tool: PointMass | None,
-                 outboard: list[PointMass]):
+                 outboard: list[PointMass], parent_body: int | None = None):
         super().__init__()
         self._hand = int(hand_body)
+        parent = self._hand if parent_body is None else int(parent_body)
         self._X_HK = X_HK
         self._camera = int(camera_body)
         self._X_BC = X_BC
@@ -83,6 +87,9 @@ class GroundTruth(LeafSystem):
         self.DeclareAbstractOutputPort(
             "X_WH", lambda: AbstractValue.Make(RigidTransform()),
             lambda c, o: o.set_value(self._X_W(c, self._hand)), poses_only)
+        self.DeclareAbstractOutputPort(
+            "X_WL", lambda: AbstractValue.Make(RigidTransform()),
+            lambda c, o: o.set_value(self._X_W(c, parent)), poses_only)
         self.DeclareAbstractOutputPort(
             "true_X_WC", lambda: AbstractValue.Make(RigidTransform()),
             lambda c, o: o.set_value(self._X_W(c, self._camera) @ self._X_BC), poses_only)

@@ -11,7 +11,9 @@
 - loss: a feature no longer tracked (the tracker never reuses an id) or without a valid depth
   (occluded) stops feeding its identifier; after ``max_lost_time`` s without a sample its slot is
   freed; a candidate still not converged after ``max_unconverged_time`` s is rejected (another
-  link, a sliding silhouette corner) and its slot freed.
+  link, a sliding silhouette corner) and its slot freed;
+- another link: with the parent link's pose known, a candidate whose samples, when it first
+  converges, fit that link better than the hand (``fitting.on_parent_link``) is rejected.
 """
 
 import math
@@ -25,6 +27,7 @@ from sustain_drake.identification.candidates.fitting import (
     FIRST_CHOICE_POINTS,
     best_p_HP_given_camera,
     explained,
+    on_parent_link,
     predicted_p_CP,
     rotation_spread,
     sample_error,
@@ -76,7 +79,7 @@ def _feed_tracked(bank, params, criteria, seen: SeenFrame, searching: bool, obse
         if k is not None and usable[k] and (searching or is_leader or learning):
             num = c.solution.num_samples
             c = feed(c, params, criteria, frame_time, p_CP[k], X_frame, seen.given.forgetting_factor,
-                     refine=is_leader)
+                     refine=is_leader, X_WL=seen.X_WL)
             fed = fed or c.solution.num_samples > num
         if searching and not is_leader:
             if frame_time - c.last_sample > params.max_lost_time:
@@ -85,6 +88,11 @@ def _feed_tracked(bank, params, criteria, seen: SeenFrame, searching: bool, obse
             sol = c.solution
             too_long = frame_time - c.admitted > params.max_unconverged_time and not sol.verdict.converged
             misfit = sol.num_samples >= criteria.min_samples and not sol.expected_rms <= params.reject_rms
+            # A point that the hand's parent link explains better is fixed on that link: judged
+            # once, when it first converges (two Gauss-Newton fits, a few ms).
+            if sol.verdict.converged and c.on_hand is None and c.parent_statistic is not None:
+                c = replace(c, on_hand=not on_parent_link(c))
+            misfit = misfit or c.on_hand is False
             # While observing (with observers), a point the adopted camera does not explain is not
             # of the hand (or not any more): its slot goes to a new point.
             misfit = misfit or (observing and c.frames >= params.observe_min_samples
@@ -124,7 +132,7 @@ def _admit_new(bank, params, criteria, seen: SeenFrame, kept: list, rejected: fr
         i = int(ids[k])
         if ((on_body[k] or in_body_cell[k] or near_known[k]) and usable[k] and i not in present
                 and i not in rejected and (seen.symmetric[k] or not symmetric_only)):
-            kept.append(admit(i, criteria, frame_time, p_CP[k], X_frame, bool(seen.symmetric[k])))
+            kept.append(admit(i, criteria, frame_time, p_CP[k], X_frame, bool(seen.symmetric[k]), seen.X_WL))
             present.add(i)
             admitted = True
             if math.isnan(round_start):
@@ -169,14 +177,16 @@ def _archived(archive: list, params: CandidateParams) -> list:
     return sorted(useful, key=lambda c: -c.solution.num_samples)[: params.max_archived]
 
 
-def admit(feature_id, criteria, time, p_CP, X_WH, symmetric: bool = False) -> Candidate:
-    """A new candidate, its identifier fed its first sample."""
+def admit(feature_id, criteria, time, p_CP, X_WH, symmetric: bool = False, X_WL=None) -> Candidate:
+    """A new candidate, its identifier fed its first sample (and, with the parent link's pose
+    ``X_WL``, its ``parent_statistic``)."""
     identifier = EyeToHandIdentifier(criteria=criteria)
     identifier.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
     return Candidate(feature_id, identifier.state, identifier.solve(refine_estimate=False), float(time),
                      float(time), np.array(p_CP), np.array(X_WH), sampled_p_CP=np.array(p_CP),
                      symmetric=symmetric, view_list=view_of(p_CP, X_WH)[None, :],
-                     view_sums=_view_row(p_CP, X_WH[:3, :3], X_WH[:3, 3])[None, :])
+                     view_sums=_view_row(p_CP, X_WH[:3, :3], X_WH[:3, 3])[None, :],
+                     parent_statistic=_with_sample(None, p_CP, X_WL))
 
 
 def identifier_of(c: Candidate, criteria, forgetting_factor) -> EyeToHandIdentifier:
@@ -191,9 +201,23 @@ def solve(c: Candidate, criteria, forgetting_factor, refine: bool) -> Candidate:
     return replace(c, solution=solution)
 
 
-def feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, refine) -> Candidate:
+def _with_sample(statistic, p_CP, X_WL, forgetting_factor: float = 1.0):
+    """``Candidate.parent_statistic`` with the sample ``p_CP`` at the parent link's pose ``X_WL``
+    (None when that pose is not known; from a first sample when ``statistic`` is None), forgotten
+    as the candidate's own statistic is."""
+    if X_WL is None:
+        return None
+    identifier = EyeToHandIdentifier(forgetting_factor)
+    if statistic is not None:
+        identifier.set_state(statistic)
+    identifier.add(p_CP, X_WL[:3, :3], X_WL[:3, 3])
+    return identifier.state
+
+
+def feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, refine, X_WL=None) -> Candidate:
     """The candidate given this frame's point: skipped outside the motion gate, held (not lost) when
-    seen where it was (``min_view_change``), else one sample more."""
+    seen where it was (``min_view_change``), else one sample more (in ``parent_statistic`` too, at
+    the parent link's pose ``X_WL``, while it is known from the admission on)."""
     gated = within_motion_gate(c.last_p_CP, c.last_X_WH, p_CP, X_WH, params)
     c = replace(c, last_p_CP=np.array(p_CP), last_X_WH=np.array(X_WH))
     if not gated:
@@ -204,8 +228,10 @@ def feed(c: Candidate, params, criteria, time, p_CP, X_WH, forgetting_factor, re
     identifier = identifier_of(c, criteria, forgetting_factor)
     identifier.add(p_CP, X_WH[:3, :3], X_WH[:3, 3])
     c = _with_view(c, p_CP, X_WH, params)
-    return replace(c, statistic=identifier.state, last_sample=float(time), sampled_p_CP=np.array(p_CP),
-                   solution=identifier.solve(refine_estimate=refine))
+    parent = (None if c.parent_statistic is None
+              else _with_sample(c.parent_statistic, p_CP, X_WL, forgetting_factor))
+    return replace(c, statistic=identifier.state, parent_statistic=parent, last_sample=float(time),
+                   sampled_p_CP=np.array(p_CP), solution=identifier.solve(refine_estimate=refine))
 
 
 def _with_view(c: Candidate, p_CP, X_WH, params: CandidateParams) -> Candidate:

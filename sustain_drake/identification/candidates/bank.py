@@ -38,6 +38,13 @@ class Candidate:
     # its point was centrally symmetric when admitted; False: anchored on its patch (a
     # second choice, ``fitting.FIRST_CHOICE_POINTS``) or not known
     symmetric: bool = False
+    # the same samples' statistic with the pose of the hand's parent link (``FrameInput.X_WL``) in
+    # place of the hand's: a point fixed on that link fits it better (``fitting.on_parent_link``);
+    # None: that pose is not known
+    parent_statistic: np.ndarray | None = None
+    # whether its samples fit the hand better than the parent link when it first converged (None:
+    # not judged)
+    on_hand: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -78,7 +85,7 @@ class CandidateBank:
         sample_error: ``s_t`` of the newest observation sample, m^2.
         last_reset: the last reset value seen.
         last_frame: capture time of the last frame used, s.
-        poses: recent hand poses ``(time, X_WH)``.
+        poses: recent hand poses ``(time, X_WH, X_WL)`` (``X_WL`` None when not known).
         adoptions: every leader chosen, in order.
         round_start: when the first candidate since the last reset was admitted (NaN: none yet).
         first_found: when the first candidate of the run was admitted (never reset; NaN: none yet).
@@ -161,20 +168,29 @@ def empty_solution(criteria: ConvergenceCriteria | None = None) -> EyeToHandSolu
     return EyeToHandIdentifier(criteria=criteria).solve(refine_estimate=False)
 
 
-def record_pose(bank: CandidateBank, time: float, X_WH: np.ndarray) -> CandidateBank:
-    """Adds the hand pose at ``time`` to the short history."""
-    poses = (bank.poses + ((float(time), np.array(X_WH, dtype=float)),))[-POSE_HISTORY:]
+def record_pose(bank: CandidateBank, time: float, X_WH: np.ndarray,
+                X_WL: np.ndarray | None = None) -> CandidateBank:  # fmt: skip
+    """Adds the hand pose (and its parent link's, ``X_WL``; None: not known) at ``time`` to the
+    short history."""
+    X_WL = None if X_WL is None else np.array(X_WL, dtype=float)
+    poses = (bank.poses + ((float(time), np.array(X_WH, dtype=float), X_WL),))[-POSE_HISTORY:]
     return replace(bank, poses=poses)
+
+
+def poses_at(bank: CandidateBank, time: float, tolerance: float) -> tuple | None:
+    """The recorded ``(X_WH, X_WL)`` nearest ``time`` if within ``tolerance`` s, else None."""
+    best, best_dt = None, tolerance
+    for t, X_WH, X_WL in bank.poses:
+        dt = abs(t - time)
+        if dt <= best_dt:
+            best, best_dt = (X_WH, X_WL), dt
+    return best
 
 
 def pose_at(bank: CandidateBank, time: float, tolerance: float) -> np.ndarray | None:
     """The recorded hand pose nearest ``time`` if within ``tolerance`` s, else None."""
-    best, best_dt = None, tolerance
-    for t, X in bank.poses:
-        dt = abs(t - time)
-        if dt <= best_dt:
-            best, best_dt = X, dt
-    return best
+    found = poses_at(bank, time, tolerance)
+    return None if found is None else found[0]
 
 
 @dataclass(frozen=True)

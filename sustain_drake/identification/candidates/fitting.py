@@ -80,6 +80,30 @@ def own_fit(statistic: np.ndarray, R_WC: np.ndarray, p_WC: np.ndarray) -> tuple[
     return p_HP, mean_squared_error_of(statistic, pack_x(R_WC, p_WC, p_HP))
 
 
+def on_parent_link(c: Candidate) -> bool:
+    """Whether the candidate's samples fit the hand's parent link L (``parent_statistic``: the same
+    samples with the pose of L) better than the hand: the mean squared error of its own
+    Gauss-Newton fit (Eq. (30), each model with its own camera and point) under L's poses below
+    the one under the hand's. Both models have the same unknowns (a camera and one point fixed on
+    a body), so the smaller error is the likelier body: no threshold. The TLS expected error
+    (Eq. (13)) cannot tell them apart: it is algebraic, and a wrong camera absorbs most of the
+    difference. A point fixed on L near the axis of the hand's last joint moves almost like the
+    hand and fits it under a camera off by centimetres (docs/hand_eye_record.md, "Points on the
+    wrist"); nearer the axis the two fits are alike and the choice costs little either way. False
+    when L's poses are not known (``parent_statistic`` None) or either fit has no solution."""
+    if c.parent_statistic is None:
+        return False
+    errors = []
+    for statistic in (c.statistic, c.parent_statistic):
+        identifier = EyeToHandIdentifier()
+        identifier.set_state(statistic)
+        refined = identifier.solve(refine_estimate=True).refined
+        if refined is None or not np.isfinite(refined.mean_squared_error):
+            return False
+        errors.append(refined.mean_squared_error)
+    return bool(errors[1] < errors[0])
+
+
 def explained(c: Candidate, x, adopted_mse: float, params: CandidateParams) -> bool:
     """Whether the camera of ``x`` explains the candidate's samples (its own best ``p_HP``) within
     ``observe_consistency`` times the adopted RMS error."""

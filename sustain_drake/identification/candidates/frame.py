@@ -55,6 +55,10 @@ class FrameInput:
     # such points are preferred to those anchored on their patch (None, or a length other
     # than ids': not known, no point is)
     symmetric: np.ndarray | None = None
+    # the pose now (4 x 4) of the hand's parent link L: the body the hand's last moving joint turns
+    # it on (``fitting.on_parent_link``: a point fixed on L near that joint's axis moves almost
+    # like the hand). None: not known
+    X_WL: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,7 @@ class SeenFrame:
     body: np.ndarray  # on_body | in_body_cell
     row: dict  # feature id -> its row
     symmetric: np.ndarray  # usable and centrally symmetric (all False when not known)
+    X_WL: np.ndarray | None = None  # the parent link's pose at the capture time (None: not known)
 
     @property
     def time(self) -> float:
@@ -78,7 +83,8 @@ class SeenFrame:
         return self.given.frame_time
 
     @classmethod
-    def of(cls, given: FrameInput, X_WH: np.ndarray, params: CandidateParams) -> "SeenFrame":
+    def of(cls, given: FrameInput, X_WH: np.ndarray, params: CandidateParams,
+           X_WL: np.ndarray | None = None) -> "SeenFrame":
         ids = np.asarray(given.ids, np.int64).ravel()
         p_CP = np.asarray(given.p_CP, dtype=float).reshape(-1, 3)
         usable = np.asarray(given.valid, bool).ravel() & np.all(np.isfinite(p_CP), axis=1)
@@ -89,7 +95,7 @@ class SeenFrame:
         symmetric = (np.zeros_like(usable) if given.symmetric is None or len(given.symmetric) != len(ids)
                      else np.asarray(given.symmetric, bool).ravel() & usable)
         return cls(given, X_WH, ids, p_CP, usable, on_body, in_body_cell, on_body | in_body_cell, row,
-                   symmetric)
+                   symmetric, X_WL)
 
 
 @dataclass(frozen=True)

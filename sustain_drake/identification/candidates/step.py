@@ -11,7 +11,7 @@ from sustain_drake.identification.candidates.bank import (
     CandidateBank,
     ClearedModel,
     mark_verified,
-    pose_at,
+    poses_at,
     record_pose,
 )
 from sustain_drake.identification.candidates.camera_move_recovery import model_points, with_scene_turn
@@ -32,17 +32,17 @@ def step(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCrit
         bank = _after_reset(bank, params, frame)
     elif frame.reset_reason == CAMERA_MOVED and bank.last_reason != CAMERA_MOVED:
         bank = _found_camera_move(bank, params, frame)
-    bank = record_pose(bank, frame.time, frame.X_WH)
+    bank = record_pose(bank, frame.time, frame.X_WH, frame.X_WL)
     bank = with_scene_turn(bank, frame.scene_turn)
     reference_x = frame.reference_x
     if bank.leader >= 0 and x_is_set(reference_x):
         bank = replace(bank, model_x=np.array(reference_x, dtype=float))
     if not frame.frame_time > bank.last_frame:
         return bank  # no new frame (or none yet)
-    X_frame = pose_at(bank, frame.frame_time, params.pose_tolerance)
-    if X_frame is None:
+    found = poses_at(bank, frame.frame_time, params.pose_tolerance)
+    if found is None:
         return replace(bank, last_frame=float(frame.frame_time))  # no pose for that frame: skip it
-    seen = SeenFrame.of(frame, X_frame, params)
+    seen = SeenFrame.of(frame, found[0], params, found[1])
     pool = gather(bank, params, criteria, seen)
     pool, more_motion, held_id = choose(bank, params, criteria, seen, pool)
     leader, frame_time = pool.leader, seen.time
