@@ -25,7 +25,8 @@ from sustain_drake.loops.coordination import (
     make_sustainable_coordination,
 )
 from sustain_drake.loops.hand_eye import HandEyeConfig
-from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant
+from sustain_drake.station import models_dir
+from sustain_drake.systems.hand_pose_from_plant import HandPoseFromPlant, parent_link
 
 MASS, P_KCM = 0.8, np.array([0.02, -0.01, 0.09])  # the held payload, kg and m in K
 G_W = np.array([0.0, 0.0, -9.81])
@@ -228,6 +229,9 @@ def test_hand_pose_from_a_plant_with_other_bodies_reads_the_arm_instance_only():
     assert fk.GetOutputPort("X_WH").Eval(context).IsNearlyEqualTo(expected, 1e-12)
     assert fk.GetOutputPort("X_WK").Eval(context).IsNearlyEqualTo(
         plant.GetBodyByName("upper_link").EvalPoseInWorld(plant_context), 1e-12)
+    # The hand's parent link: the body its (elbow) joint turns it on.
+    assert fk.GetOutputPort("X_WL").Eval(context).IsNearlyEqualTo(
+        plant.GetBodyByName("upper_link").EvalPoseInWorld(plant_context), 1e-12)
     # A new input is a new pose (the cached plant context follows it).
     fk.get_input_port().FixValue(context, np.zeros(2))
     assert not fk.GetOutputPort("X_WH").Eval(context).IsNearlyEqualTo(expected, 1e-6)
@@ -317,3 +321,17 @@ def test_with_excite_and_a_plant_the_identifying_motion_chooses_from_the_candida
     assert not fed(make_sustainable_coordination(info, 3, **arm))
     assert not fed(make_sustainable_coordination(info, 3, hand_eye=HandEyeConfig(excite=True),
                                                  joint_ranges=[[-1.0, 1.0]] * 3))
+
+
+def test_the_hands_parent_link_is_found_through_welds():
+    """``parent_link``: our arm's gripper is welded to the last link (the wrist sensor), which the
+    wrist roll turns on ``arm_link4``; a body welded to the world has the world as its parent."""
+    plant = MultibodyPlant(0.0)
+    Parser(plant).AddModels(str(models_dir() / "arm.sdf"))
+    inertia = SpatialInertia(1.0, np.zeros(3), UnitInertia.SolidBox(0.1, 0.1, 0.1))
+    box = plant.AddRigidBody("welded_box", plant.AddModelInstance("objects"), inertia)
+    plant.WeldFrames(plant.world_frame(), box.body_frame())
+    plant.Finalize()
+    assert parent_link(plant, plant.GetBodyByName("gripper")).name() == "arm_link4"
+    assert parent_link(plant, plant.GetBodyByName("arm_link2")).name() == "arm_link1"
+    assert parent_link(plant, box).index() == plant.world_body().index()
