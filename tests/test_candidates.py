@@ -465,6 +465,32 @@ def test_a_camera_is_adopted_only_when_a_second_point_agrees():
     assert bank.leader == 9 and bank.adoptions[0].time >= 49 * DT  # once 4 has 50 samples
 
 
+@pytest.mark.parametrize("witness_on_hand", [True, False])
+def test_an_ended_track_confirms_a_converged_point_and_one_of_another_link_does_not(witness_on_hand):
+    """``confirm_with_witness``: the second point's track ends (k = 60) before the first converges
+    (k = 123). Its 60 samples (kept in the archive with ``joint``) still confirm the camera when it is
+    a point of the hand; a point of another link does not, so nothing is adopted."""
+    params = CandidateParams(observe_min_samples=50, joint=True)
+    p4 = P_TOOL + [0.03, -0.02, 0.04]
+
+    def ended(k, X, rng):
+        if k >= 400:
+            return None
+        if k >= 60:
+            return [9], [seen(X, P_TOOL, rng)], [True], [True]
+        X_4, p = (X, p4) if witness_on_hand else other_link(X, k, P_OTHER)
+        return [4, 9], [seen(X_4, p, rng, noise=1e-3), seen(X, P_TOOL, rng)], [True, True], [True, True]
+
+    bank, _ = run(ended, params=params)
+    assert bank.find(9).solution.verdict.converged
+    assert bank.find(4) is None  # not tracked at the end
+    if witness_on_hand:
+        assert bank.leader == 9 and bank.adoptions[0].time > 60 * DT
+        assert np.linalg.norm(bank.adoptions[0].estimate.p_WC - TRUTH.X_WC[:3, 3]) < 5e-3
+    else:
+        assert bank.leader == -1 and not bank.adoptions
+
+
 def test_params_validation():
     with pytest.raises(ValueError, match="max_candidates"):
         CandidateParams(max_candidates=0)

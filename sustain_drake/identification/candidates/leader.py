@@ -22,12 +22,13 @@ from sustain_drake.identification.candidates.fitting import (
     joint_camera_sd,
     joint_refined,
     mean_squared_error_of,
+    on_parent_link,
     rotation_spread,
     smallest_rotation_lever,
     within_accuracy,
 )
 from sustain_drake.identification.candidates.frame import Pool, SeenFrame
-from sustain_drake.identification.candidates.observation import consistent
+from sustain_drake.identification.candidates.observation import consistent, witnessed_by
 from sustain_drake.identification.candidates.params import CandidateParams
 from sustain_drake.identification.eye_to_hand import EyeToHandEstimate, pack_x
 from sustain_drake.identification.sustainable_identifier import ConvergenceCriteria, Verdict
@@ -75,7 +76,7 @@ def choose(bank: CandidateBank, params: CandidateParams, criteria: ConvergenceCr
         else:
             best = min(converged, key=lambda c: c.solution.expected_mse)
             best = solve(best, criteria, forgetting_factor, refine=True)
-            confirmed = _confirmed(best, pool.kept, params, seen)
+            confirmed = _confirmed(best, pool, params, seen)
         if best.solution.verdict.converged and confirmed:
             pool, held_back = _adopt(best, params, seen, pool, unseen)
     elif pool.leader < 0 and params.keep_camera and bank.previous_x is not None:
@@ -151,14 +152,24 @@ def _adopt(best: Candidate, params: CandidateParams, seen: SeenFrame, pool: Pool
                    adoptions=adoptions), False
 
 
-def _confirmed(c: Candidate, kept, params: CandidateParams, seen: SeenFrame) -> bool:
+def _confirmed(c: Candidate, pool: Pool, params: CandidateParams, seen: SeenFrame) -> bool:
     """Whether another candidate's samples agree with ``c``'s camera (with their own ``p_HP``),
-    when ``params.confirm_with_witness`` asks for it: two tracked points of the hand must tell the
-    same camera pose before it is adopted."""
+    when ``params.confirm_with_witness`` asks for it: two points of the hand must tell the same
+    camera pose before it is adopted. The witness is a point tracked now (``consistent``: its
+    samples and this frame's point), else one whose track ended since the reset (``pool.archive``):
+    its samples are as much a second view of the camera, and a tool's points leave view within
+    seconds, so a converged point can outlive every other track by tens of seconds. An archived
+    witness must fit the hand better than its parent link (``fitting.on_parent_link``): points on
+    the wrist agree on a wrong camera among themselves."""
     if not params.confirm_with_witness:
         return True
-    probe = CandidateBank(candidates=tuple(kept), leader=c.feature_id, adopted_mse=c.solution.expected_mse)
-    return bool(consistent(probe, params, seen, c.solution.x, exclude=(c.feature_id,)))
+    probe = CandidateBank(candidates=tuple(pool.kept), leader=c.feature_id,
+                          adopted_mse=c.solution.expected_mse)
+    if consistent(probe, params, seen, c.solution.x, exclude=(c.feature_id,)):
+        return True
+    return any(o.feature_id != c.feature_id and o.on_hand is not False
+               and witnessed_by(o, params, c.solution.x, c.solution.expected_mse) and not on_parent_link(o)
+               for o in pool.archive)
 
 
 def refine_adopted(bank: CandidateBank, params: CandidateParams, reference_x, time: float) -> CandidateBank:

@@ -270,16 +270,34 @@ def consistent(bank, params, seen: SeenFrame, x, exclude=(), verified=False, min
         k = row.get(c.feature_id)
         if k is None or not usable[k] or c.feature_id in exclude:
             continue
-        if c.frames < (params.observe_min_samples if min_samples is None else min_samples):
-            continue
         if verified and c.verified_samples < params.verified_overlap:
             continue  # first tracked while the model was not verified: its p_HP is unchecked
-        if rotation_spread(c.statistic) < params.min_rotation_spread:
-            continue  # the hand hardly turned: any point, even on another link, would fit
-        p_HP, mse = own_fit(c.statistic, R_WC, p_WC)
-        if mse <= limit and sample_error(p_now[k], X_now, pack_x(R_WC, p_WC, p_HP)) <= _NOW_FACTOR * limit:
-            out.append((mse, c.feature_id, p_HP, k))
+        fit = _own_fit_within(c, params, R_WC, p_WC, limit, min_samples)
+        now = None if fit is None else sample_error(p_now[k], X_now, pack_x(R_WC, p_WC, fit[0]))
+        if now is not None and now <= _NOW_FACTOR * limit:
+            out.append((fit[1], c.feature_id, fit[0], k))
     return out
+
+
+def _own_fit_within(c, params, R_WC, p_WC, limit: float, min_samples=None):
+    """``(p_HP, mse)`` of the candidate's own fit under the camera (``fitting.own_fit``) when it has
+    ``min_samples`` frames (None: ``observe_min_samples``) over ``min_rotation_spread`` of hand
+    rotation (else any point, even on another link, would fit) and fits within ``limit`` (m^2);
+    else None."""
+    if c.frames < (params.observe_min_samples if min_samples is None else min_samples):
+        return None
+    if rotation_spread(c.statistic) < params.min_rotation_spread:
+        return None
+    p_HP, mse = own_fit(c.statistic, R_WC, p_WC)
+    return (p_HP, mse) if mse <= limit else None
+
+
+def witnessed_by(c, params: CandidateParams, x, adopted_mse: float) -> bool:
+    """Whether the candidate's samples alone (no frame of now: its track may have ended) fit the
+    camera of ``x`` with its own ``p_HP`` within ``observe_consistency`` times the RMS error
+    ``adopted_mse`` (m^2), with ``observe_min_samples`` frames over ``min_rotation_spread``."""
+    R_WC, p_WC = np.asarray(x)[0:9].reshape(3, 3, order="F"), np.asarray(x)[9:12]
+    return _own_fit_within(c, params, R_WC, p_WC, params.observe_consistency**2 * adopted_mse) is not None
 
 
 def _near_tool(options, anchor, params: CandidateParams) -> list:
