@@ -433,6 +433,37 @@ def test_a_move_while_the_tracks_were_broken_is_found_from_the_still_scenes_imag
     assert k_walked is None and walked.moves == 0
 
 
+def test_the_camera_stays_unmoved_across_a_gap_the_still_scenes_image_shows_no_move_in():
+    """``scene_still_since`` joins the still frames across a gap (every track ended: a person in
+    front of the camera) once the reference, matched after it, shows no move; it is inf until that
+    check, and it restarts after a move found so, or where no image can check the gap."""
+    def still_since_during(shift_px, with_image=True):
+        (g0, px0, p0), (g1, px1, p1) = textured_frames(shift_px)
+        state, seen = CameraMotionState(), []
+        for k in range(120):
+            if k < 40:
+                gray, ids, px, p = g0, np.arange(len(px0)), px0, p0
+            elif k < 46:
+                gray, ids, px, p = g1, np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3))
+            else:
+                gray, ids, px, p = g1, 1000 + np.arange(len(px1)), px1, p1
+            frame = TrackedFeatures(ids=ids, p_px=px, flow_px=np.zeros_like(px), p_CP=p,
+                                    valid=np.ones(len(ids), bool), time=k / FPS)
+            state = camera_motion.step(state, frame, np.zeros(len(ids), bool), np.array([True]), PARAMS,
+                                       SIZE, INTRINSICS, gray if with_image else None)
+            seen.append(state.scene_still_since())
+        return np.array(seen)
+
+    still = still_since_during(0)
+    first = still[39]
+    assert first < 40 / FPS and np.all(still[41:46] == np.inf)  # the gap, not yet checked
+    assert np.all(still[-20:] == first)  # checked: the camera did not move since before the gap
+    moved = still_since_during(12)
+    assert np.all(moved[-20:] > 46 / FPS) and np.all(np.isfinite(moved[-20:]))
+    unchecked = still_since_during(0, with_image=False)
+    assert np.all(unchecked[-20:] > 46 / FPS) and np.all(np.isfinite(unchecked[-20:]))
+
+
 def run_tracked_pan(shift_px, with_image=True, pan_frames=6):
     """The arm moving throughout; 40 frames of the wall, then a pan of ``shift_px`` over
     ``pan_frames`` frames that the tracks follow (the move is declared), and every track ends as

@@ -219,8 +219,11 @@ class CameraMotionState:
     empty while moving); ``view_before``: the one before the current or last move (None once its
     turn is formed, or when the scene had not been at rest before); ``episode_start``: the current
     or last episode's first moving frame (s); ``turn``: the last move's ``SceneTurn``;
-    ``judged_still_since``: since when every frame was judged and still, outside an episode (s; inf
-    now: moving, in an episode, or too few anchors to judge), so the camera has not moved since;
+    ``unmoved_since``: since when the still scene shows the camera has not moved (s): the frames
+    judged still, outside an episode, joined across a gap that the reference, matched after it,
+    showed no move in (``scene_still_since``); inf after a declared move until a frame is judged
+    still, and where a frame is not judged with no reference to check it against later or the
+    reference aged before any view matched it;
     ``move_start``: when the last declared camera move began (s; -inf before any: its episode's first
     moving frame, or the time of the reference a move the tracks missed was found against, so at
     most when the camera began to move);
@@ -251,11 +254,16 @@ class CameraMotionState:
     view_before: SceneView | None = None
     episode_start: float = -math.inf
     turn: SceneTurn = field(default_factory=SceneTurn)
-    judged_still_since: float = math.inf
+    unmoved_since: float = math.inf
     move_start: float = -math.inf
     reference: SceneReference | None = None
     gap: bool = False
     before_move: SceneReference | None = None
+
+    def scene_still_since(self) -> float:
+        """Since when the camera has not moved as the still scene shows (s; ``unmoved_since``): inf
+        while moving, in an episode, or while a gap is not yet checked against the reference."""
+        return math.inf if self.moving or self.gap else self.unmoved_since
 
     def output(self) -> np.ndarray:
         """``[moving (0/1), moves, accumulated displacement (px)]``."""
@@ -454,13 +462,14 @@ def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray,
     since = np.where(restart, time, since)
     clock = np.where(restart, arm_clock, _remembered(state, ids, state.still_clock))
     order = np.argsort(ids)
-    judged_still = math.inf
     if frame.judged and not frame.moving and not state.moving:
-        judged_still = min(state.judged_still_since, float(time))
+        unmoved = min(state.unmoved_since, float(time))
+    else:  # a gap or an episode: it holds while a reference can check it (a gap's, once still)
+        unmoved = state.unmoved_since if state.reference is not None else math.inf
     new = replace(state, ids=ids[order], still_since=since[order], still_clock=clock[order],
                   still_px=anchor_px[order],
                   last_time=float(time), last=frame, arm_moving=arm_moving, arm_clock=arm_clock,
-                  arm_still_since=arm_still_since, judged_still_since=judged_still)
+                  arm_still_since=arm_still_since, unmoved_since=unmoved)
     if frame.moving:
         M = np.vstack([frame.M if drift is None else drift, [0.0, 0.0, 1.0]])
         if not state.moving:  # onset: a new episode; the still view so far is the view before
@@ -473,7 +482,8 @@ def step(state: CameraMotionState, features: TrackedFeatures, robot: np.ndarray,
         if not new.declared and new.frames >= params.min_frames and accumulated >= params.move_px:
             # A move the tracks followed: the reference is of the camera before it.
             new = replace(new, declared=True, moves=state.moves + 1, reference=None, gap=False,
-                          before_move=state.reference, move_start=new.episode_start)
+                          before_move=state.reference, move_start=new.episode_start,
+                          unmoved_since=math.inf)
         return new
     if not frame.judged and new.reference is not None:
         # The tracks may miss a move now: the view after starts anew (a view across a move is none).
@@ -568,11 +578,11 @@ def _checked_against_reference(state: CameraMotionState, gray: np.ndarray, ids: 
     found = match(reference, gray, px, p_CP, params.move_px, params.min_inlier_fraction)
     if found is None:  # not agreed (yet): tried again later, until the reference is too old
         too_old = time - reference.time > MAX_REFERENCE_AGE
-        return replace(state, reference=current, gap=False) if too_old else state
+        return replace(state, reference=current, gap=False, unmoved_since=math.inf) if too_old else state
     state = replace(state, reference=current, gap=False)
     if found.moved_px < params.move_px:
         return state
     turn = _matched_turn(found, state.moves + 1, float(time), reference.time, intrinsics)
     return replace(state, moves=state.moves + 1, declared=True, accumulated_px=found.moved_px,
                    M_episode=found.H, episode_start=reference.time, move_start=reference.time, turn=turn,
-                   view_before=None)
+                   view_before=None, unmoved_since=math.inf)

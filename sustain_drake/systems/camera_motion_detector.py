@@ -73,8 +73,11 @@ class CameraMotionDetector(LeafSystem):
     camera move, ``move`` 0 before any; formed ``params.turn_frames`` still frames after the move,
     only with ``camera_info``, the camera's intrinsics, and the tracked features' 3-D points;
     connect to the ``CandidateIdentifiers``' ``scene_turn``), ``scene_still_since`` (1, s: since
-    when every frame was judged still, outside a move; inf while moving or when too few anchors
-    judge a frame: connect to the ``CandidateIdentifiers``' ``scene_still_since``), ``move_start``
+    when the still scene shows the camera has not moved: the frames judged still, joined across a
+    gap (a person in front, too few anchors) that the still scene's reference, matched after it,
+    showed no move in; inf while moving or while such a gap is not yet checked
+    (``CameraMotionState.unmoved_since``): connect to the ``CandidateIdentifiers``'
+    ``scene_still_since``), ``move_start``
     (1, s: when the last declared camera move began, -inf before any; connect to the
     ``CoordinationStateMachine``'s ``camera_move_start``, so that a move found late, after the
     observation rule's reset for it, is not declared a second change).
@@ -116,7 +119,7 @@ class CameraMotionDetector(LeafSystem):
             "feature_on_body", lambda: AbstractValue.Make(FeatureBodyFlags()), self._calc_flags,
             prerequisites_of_calc={self.all_state_ticket(), self._flags.ticket()})  # fmt: skip
         self.DeclareVectorOutputPort("scene_still_since", 1, lambda c, o: o.SetAtIndex(
-            0, self.motion_state(c).judged_still_since), prerequisites_of_calc=state)  # fmt: skip
+            0, self.motion_state(c).scene_still_since()), prerequisites_of_calc=state)  # fmt: skip
         self.DeclareVectorOutputPort("move_start", 1, lambda c, o: o.SetAtIndex(
             0, self.motion_state(c).move_start), prerequisites_of_calc=state)  # fmt: skip
         self.DeclareAbstractOutputPort(
