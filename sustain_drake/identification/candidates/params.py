@@ -42,8 +42,8 @@ class CandidateParams:
     primary_failures: int = 10
     # after a reset, a candidate that fits the old camera leads at once with it (a slip moves only p_HP)
     keep_camera: bool = True
-    # count: samples to lead with the kept camera when the static scene stayed still since
-    # before the reset; only p_HP (3 unknowns) is new then. Else observe_min_samples, and the
+    # count: samples to lead with the kept camera when the static scene shows the camera unmoved
+    # since before the reset; only p_HP (3 unknowns) is new then. Else observe_min_samples, and the
     # points since the reset must pin the camera to camera_accuracy (``slip_recovery``)
     keep_camera_min_samples: int = 100
     # a converged candidate leads only if another one fits its camera (one track can fit a wrong camera)

@@ -2,8 +2,9 @@
 was, so after a reset that was not a camera move, a candidate that the abandoned model's camera explains
 leads at once with that camera; only its ``p_HP`` (3 unknowns) is identified again.
 
-That the camera stayed is known one of two ways: the static scene was judged still since before the
-reset (a ``CameraMotionDetector``), or the samples since the reset show it themselves. A camera move
+That the camera stayed is known one of two ways: the static scene shows it unmoved since before the
+reset (a ``CameraMotionDetector``'s ``scene_still_since``: still frames, joined across gaps its
+reference shows no move in), or the samples since the reset show it themselves. A camera move
 the detector missed (too few static anchors, a slow turn) resets the model like a slip; a point's own
 ``p_HP`` then absorbs much of the camera's error (a turn ``d`` shifts the point by about ``z d`` across
 the view, which hand turns about that shift's axis leave unseen), so its fit alone does not tell the
