@@ -100,6 +100,11 @@ def test_a_leader_waits_while_its_cameras_95_percent_region_exceeds_the_accuracy
     assert np.all(region <= 0.05) and np.all(np.array(bank.adoptions[0].camera_sd) > np.array(sd))
     bank, _ = run(frames, params=replace(PARAMS, camera_accuracy=0.5 * candidates.fitting.REGION_95 * sd[0]))
     assert bank.leader < 0 and not bank.adoptions and bank.more_motion and bank.held_back == 9
+    # CandidateIdentifiers' more_motion: 2 for a converged point held back (more points wanted:
+    # the detector's trials), 1 for views alone, 0 for none.
+    assert bank.motion_wanted() == 2.0
+    assert replace(bank, held_back=-1).motion_wanted() == 1.0
+    assert replace(bank, more_motion=False).motion_wanted() == 0.0
 
 
 def test_other_link_alone_is_never_adopted_and_is_rejected_in_time():

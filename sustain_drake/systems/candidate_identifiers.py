@@ -214,10 +214,12 @@ class CandidateIdentifiers(LeafSystem):
     converged and was confirmed but its points' views did not pin the camera's rotation,
     ``params.min_rotation_lever`` or ``params.min_adopt_rotation_spread``, or its camera's 95 %
     region exceeded ``params.camera_accuracy`` or ``camera_rotation_accuracy``) until a leader is
-    chosen, a reset, or no converged candidate is left; else 0: the hand should move more (connect
-    an ``IdentifyingMotion``'s ``more_motion``). ``motion_statistic`` (258): while ``more_motion`` is 1,
-    the statistic ``[S | n_eff | count]`` of the candidate held back for more views, else of the
-    centrally symmetric one with the most samples, else of the one with the most; zeros otherwise
+    chosen, a reset, or no converged candidate is left; 2 instead of 1 while that converged
+    candidate is held back and seen (it wants more points too: the detector's trials); else 0: the
+    hand should move more (``CandidateBank.motion_wanted``; connect an ``IdentifyingMotion``'s
+    ``more_motion``). ``motion_statistic`` (258): while ``more_motion`` is set, the statistic
+    ``[S | n_eff | count]`` of the candidate held back for more views, else of the centrally
+    symmetric one with the most samples, else of the one with the most; zeros otherwise
     (connect an ``IdentifyingMotion``'s ``statistic``).
 
     State: the ``CandidateBank`` (abstract, immutable: a cloned context shares it), updated every ``period``
@@ -272,7 +274,7 @@ class CandidateIdentifiers(LeafSystem):
             prerequisites_of_calc={self.abstract_state_ticket(self._bank)},
         )  # fmt: skip
         self.DeclareVectorOutputPort(
-            "more_motion", 1, lambda c, o: o.SetFromVector([float(self.bank(c).more_motion)]),
+            "more_motion", 1, lambda c, o: o.SetFromVector([self.bank(c).motion_wanted()]),
             prerequisites_of_calc={self.all_state_ticket()},
         )  # fmt: skip
         self.DeclareVectorOutputPort(

@@ -13,9 +13,11 @@ from sustain_drake.systems.exciting_postures import HandEyePostures
 # State vector: [output id, last detector id seen, time of the last request (own or detector's),
 # own requests so far, since when the arm stays near one posture, time of the last request made
 # over the detector's, 1 once the state machine has observed, 1 while the postures within reach are
-# drawn about the anchor], that posture (n), the anchor (n), then the output request [joint, q_1..q_n].
-_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED, _HAS_OBSERVED, _ANCHORED = range(8)
-_POSTURE = 8
+# drawn about the anchor, when the detector's turn began (-inf: none), 1 once the arm reached its
+# posture], that posture (n), the anchor (n), then the output request [joint, q_1..q_n].
+(_ID, _DETECTOR_ID, _LAST_TIME, _OWN, _NEAR_SINCE, _LAST_FORCED, _HAS_OBSERVED, _ANCHORED, _TURN,
+ _TURN_REACHED) = range(10)
+_POSTURE = 10
 _REACHED = 0.05  # rad (max-norm): the arm is at a requested posture
 _NEAR = 0.2  # rad (max-norm): the arm stays near one posture (the confirming trials' reach)
 
@@ -42,7 +44,14 @@ class IdentifyingMotion(LeafSystem):
     within that reach (max-norm) of the posture the arm had when it was set (the anchor: there the
     points were seen; a walk from posture to posture drifts until their faces turn away), the
     farthest from the current one of ``num_draws``, and come after one ``interval`` near a posture,
-    not ``max_hold``: the far postures end the tracks of the points that want more motion.
+    not ``max_hold``: the far postures end the tracks of the points that want more motion. Once a
+    converged point is held back (``more_motion`` 2: it wants more points, not only more views of
+    its own), a detector's request forwarded has the arm until its confirming move (the arm reached
+    its posture and left it again), ``max_hold`` at most, before the next posture within reach: a
+    posture asked for every interval would otherwise replace each request before the arm is there,
+    and no trial, so no new body feature, would come (tens of seconds where the first points see
+    the hand turn too little). Before any point converged the postures go first: the trials' rests
+    would repeat the first points' views (docs/hand_eye_record.md).
 
     .. pydrake_system::
 
@@ -58,7 +67,8 @@ class IdentifyingMotion(LeafSystem):
 
     Inputs: ``detector_confirm`` (``[request_id, joint, q_1..q_n]``, the detector's ``confirm``),
     ``mode`` (the ``CoordinationStateMachine``'s), ``joint_positions`` (n, rad), ``more_motion`` (1:
-    > 0 while a ``CandidateIdentifiers``' ``more_motion`` asks for it; unconnected: never before the
+    > 0 while a ``CandidateIdentifiers``' ``more_motion`` asks for it, 2 while a converged point is
+    held back; unconnected: never before the
     first convergence), ``statistic`` (258: the eye-to-hand statistic ``[S | n_eff | count]`` of the
     candidate that wants the motion, a ``CandidateIdentifiers``' ``motion_statistic``; unconnected or
     without samples: the farthest draw). With ``postures`` (a ``HandEyePostures``), the draw whose
@@ -102,7 +112,7 @@ class IdentifyingMotion(LeafSystem):
         self._request = self._anchor + n  # where the output request starts in the state
         initial = np.zeros(self._request + 1 + n)
         initial[self._request] = -1.0  # the output request's joint: -1, a usual move
-        initial[_LAST_FORCED] = -np.inf
+        initial[_LAST_FORCED] = initial[_TURN] = -np.inf
         initial[_POSTURE:self._anchor] = np.inf  # no posture yet: the first sets it
         self._state = self.DeclareDiscreteState(initial)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
@@ -126,7 +136,8 @@ class IdentifyingMotion(LeafSystem):
         # the detector asks); it has the arm until it is there (the detector's request stays
         # pending till then), for max_hold at most.
         x[_HAS_OBSERVED] = max(x[_HAS_OBSERVED], float(not identifying))
-        asked = self._more.HasValue(context) and self._more.Eval(context)[0] > 0
+        more = float(self._more.Eval(context)[0]) if self._more.HasValue(context) else 0.0
+        asked, held = more > 0, more > 1
         # With a reach, the identifiers' ask is met at once (after one interval near a posture) by
         # postures within reach: their points' tracks must live through it.
         gentle = asked and self._reach is not None
@@ -136,18 +147,21 @@ class IdentifyingMotion(LeafSystem):
             # (an arm just outside its ranges still gets a box in them)
             x[self._anchor:self._request], x[_ANCHORED] = np.clip(q, *self._ranges.T), 1.0
         hold = self._interval if gentle else self._max_hold
+        at_request = np.max(np.abs(q - x[self._request + 1:])) <= _REACHED
+        detectors_turn = gentle and held and self._detectors_turn(x, t, at_request)
         overdue = (identifying and (x[_HAS_OBSERVED] > 0 or asked) and t - x[_NEAR_SINCE] >= hold
-                   and t - x[_LAST_FORCED] >= hold)
-        on_its_way = (t - x[_LAST_FORCED] < hold
-                      and np.max(np.abs(q - x[self._request + 1:])) > _REACHED)
+                   and t - x[_LAST_FORCED] >= hold and not detectors_turn)
+        on_its_way = t - x[_LAST_FORCED] < hold and not at_request and not detectors_turn
         waits = identifying and (overdue or on_its_way)
         if request[0] != x[_DETECTOR_ID] and not waits:  # the detector's first (body detection, §3.3)
             x[_DETECTOR_ID] = request[0]
             x[_ID] += 1
             x[_LAST_TIME] = t
             x[self._request:] = request[1:]
-        elif identifying and (overdue or (t - x[_LAST_TIME] >= self._interval
-                                          and request[0] == x[_DETECTOR_ID])):  # none pending
+            if gentle and held and not detectors_turn:  # a follow-up in the turn does not lengthen it
+                x[_TURN], x[_TURN_REACHED] = t, 0.0
+        elif identifying and not detectors_turn and (overdue or (t - x[_LAST_TIME] >= self._interval
+                                                                 and request[0] == x[_DETECTOR_ID])):
             rng = np.random.default_rng([self._seed, int(x[_OWN])])
             low, high = self._ranges[:, 0], self._ranges[:, 1]
             if gentle:
@@ -163,6 +177,20 @@ class IdentifyingMotion(LeafSystem):
             x[self._request] = -1.0  # a usual move after the rest there
             x[self._request + 1:] = far
         state.get_mutable_vector(self._state).SetFromVector(x)
+
+    def _detectors_turn(self, x: np.ndarray, t: float, at_request: bool) -> bool:
+        """Whether the detector's forwarded request still has the arm (updating ``x``): from its
+        forwarding until the arm, having reached its posture (``at_request``), leaves it (the
+        confirming move that the trial times), ``max_hold`` at most."""
+        if not t - x[_TURN] < self._max_hold:
+            x[_TURN] = -np.inf
+            return False
+        if at_request:
+            x[_TURN_REACHED] = 1.0
+        elif x[_TURN_REACHED]:
+            x[_TURN] = -np.inf  # the confirming move began
+            return False
+        return True
 
     def _chosen(self, context, q: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """The draw whose move adds the most to the ``statistic`` per second (``postures``), else the

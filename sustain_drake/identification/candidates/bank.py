@@ -144,6 +144,14 @@ class CandidateBank:
     more_motion: bool = False  # a leader was held back (lever or spread), none leads, one converged
     held_back: int = -1  # the feature id of the candidate held back (as above), -1: none
 
+    def motion_wanted(self) -> float:
+        """``CandidateIdentifiers``' ``more_motion``: 0 (none), 1 (more views of the candidates'
+        points) or 2 (a converged candidate held back, ``held_back``: more points wanted too, from
+        the detector's trials)."""
+        if not self.more_motion:
+            return 0.0
+        return 2.0 if self.held_back >= 0 else 1.0
+
     def find(self, feature_id: int) -> Candidate | None:
         for c in self.candidates:
             if c.feature_id == feature_id:
