@@ -197,7 +197,7 @@ class CandidateIdentifiers(LeafSystem):
     ``scene_turn``; unconnected: none): with ``params.keep_tool_points``, the camera after a move
     is the old one turned as the static scene shows, placed by the tool points
     (``identification.candidates.step``). ``scene_still_since`` (1, s: a ``CameraMotionDetector``'s;
-    unconnected: inf): a scene judged still since before a reset says the camera did not move, and
+    unconnected: inf): a still scene showing the camera unmoved since before a reset says it did not move, and
     the kept camera then leads with ``params.keep_camera_min_samples`` samples. ``X_WL``
     (``RigidTransform``: the pose now of the hand's parent link, the body the hand's last moving
     joint turns it on; unconnected: not known): a candidate whose samples fit that link better than

@@ -148,6 +148,8 @@ class IdentifyingMotion(LeafSystem):
             x[self._anchor:self._request], x[_ANCHORED] = np.clip(q, *self._ranges.T), 1.0
         hold = self._interval if gentle else self._max_hold
         at_request = np.max(np.abs(q - x[self._request + 1:])) <= _REACHED
+        if not (gentle and held):
+            x[_TURN] = -np.inf  # a turn ends with the hold it was for
         detectors_turn = gentle and held and self._detectors_turn(x, t, at_request)
         overdue = (identifying and (x[_HAS_OBSERVED] > 0 or asked) and t - x[_NEAR_SINCE] >= hold
                    and t - x[_LAST_FORCED] >= hold and not detectors_turn)
